@@ -1,0 +1,145 @@
+"""``tracker run``: the real-time loop on a camera, a video, an image sequence or a recording."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import sys
+import threading
+from pathlib import Path
+
+from tracker import calibration as calib_io
+from tracker.config import TrackerConfig
+from tracker.errors import BadInput
+from tracker.pipeline import Pipeline
+from tracker.runner import Health, PoseSink, Runner, Sink, StatusLine
+from tracker.scenes import SyntheticSource, preset
+from tracker.sources import open_source
+
+log = logging.getLogger(__name__)
+
+DEMO_RECORDING = Path(__file__).resolve().parent.parent / "recordings" / "demo.mcap"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help="track parts (no arguments: the bundled demo)",
+                       description="Track parts on the belt. With no --source, runs the bundled demo.")
+    p.add_argument("--source", help="camera index, video file, printf image pattern or .mcap recording")
+    p.add_argument("--calibration", help="calibration file (.yaml/.yml/.xml); a .mcap source carries its own")
+    plc = p.add_mutually_exclusive_group()
+    plc.add_argument("--plc", metavar="HOST:PORT", help="write poses to this Modbus TCP server")
+    plc.add_argument("--no-plc", action="store_true", help="do not talk to a PLC")
+    p.add_argument("--plc-unit", type=int, default=1, help="Modbus unit id (default 1)")
+    p.add_argument("--plc-base", type=int, default=0, help="register base address (default 0)")
+    p.add_argument("--plc-word-order", choices=("ABCD", "CDAB"), default="ABCD",
+                   help="word order of 32-bit values (default ABCD: high word first)")
+    p.add_argument("--plc-mode", choices=("client", "server"), default="client",
+                   help="client: write into the PLC (default); server: serve the map for the arm to poll")
+    p.add_argument("--record", metavar="OUT.mcap", help="record every frame and result to MCAP")
+    p.add_argument("--poses", metavar="OUT.jsonl", help="write the pose stream (JSON Lines)")
+    p.add_argument("--fps", type=float, help="frame rate of a file source (default: from the container)")
+    p.add_argument("--config", metavar="FILE.json", help="pipeline settings (see tracker/config.py)")
+    p.add_argument("--max-frames", type=int, help="stop after this many frames")
+    p.add_argument("--quiet", action="store_true", help="no live status line")
+    p.set_defaults(func=run)
+
+
+def load_config(path: str | None) -> TrackerConfig:
+    if path is None:
+        return TrackerConfig()
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f)
+    except OSError as exc:
+        raise BadInput(f"{path}: cannot read the configuration: {exc.strerror}") from None
+    except json.JSONDecodeError as exc:
+        raise BadInput(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    if not isinstance(data, dict):
+        raise BadInput(f"{path}: expected a JSON object of settings")
+    try:
+        return TrackerConfig.from_dict(data)
+    except TypeError as exc:
+        raise BadInput(f"{path}: {exc}") from None
+
+
+def open_inputs(args: argparse.Namespace):
+    """The source and its calibration (and the configuration the source may carry)."""
+    if args.source is None:
+        if DEMO_RECORDING.is_file():
+            args.source = str(DEMO_RECORDING)
+        else:
+            source = SyntheticSource(preset("demo"), name="synthetic demo")
+            return source, source.calibration, None
+    source = open_source(args.source, args.fps)
+    recorded_config = getattr(source, "config", None)
+    if args.calibration:
+        calibration = calib_io.load(args.calibration)
+    elif getattr(source, "calibration", None) is not None:
+        calibration = source.calibration
+    else:
+        source.close()
+        raise BadInput(f"--calibration is required for source {args.source}")
+    return source, calibration, recorded_config
+
+
+def _plc_sink(args: argparse.Namespace, health: Health, demo: bool) -> Sink | None:
+    """The PLC writer (contract section 4), or None with --no-plc."""
+    if args.plc:
+        raise BadInput("--plc: PLC output is not available in this build")
+    return None
+
+
+def _record_sink(args: argparse.Namespace, health: Health, source, calibration, config) -> Sink | None:
+    """The MCAP recorder, or None without --record."""
+    if args.record:
+        raise BadInput("--record: recording is not available in this build")
+    return None
+
+
+def run(args: argparse.Namespace) -> int:
+    demo = args.source is None
+    source, calibration, recorded_config = open_inputs(args)
+    config = load_config(args.config) if args.config else (recorded_config or TrackerConfig())
+    health = Health()
+    sinks: list[Sink] = []
+    stop = threading.Event()
+    try:
+        pipeline = Pipeline(calibration, config)
+        if args.poses:
+            sinks.append(PoseSink(args.poses))
+        for make in (lambda: _plc_sink(args, health, demo),
+                     lambda: _record_sink(args, health, source, calibration, config)):
+            sink = make()
+            if sink is not None:
+                sinks.append(sink)
+    except BaseException:
+        for sink in sinks:
+            sink.close()
+        source.close()
+        raise
+    status = None if args.quiet else StatusLine(sys.stderr)
+    runner = Runner(source, pipeline, sinks, health, status, stop, args.max_frames)
+    previous = _install_signal_handlers(stop)
+    try:
+        summary = runner.run()
+    finally:
+        _restore_signal_handlers(previous)
+    print(f"tracker: {summary.line()}")
+    return 0
+
+
+def _install_signal_handlers(stop: threading.Event) -> dict:
+    """SIGINT/SIGTERM end the loop after the current frame, so every sink closes properly."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous[sig] = signal.signal(sig, lambda *_: stop.set())
+    return previous
+
+
+def _restore_signal_handlers(previous: dict) -> None:
+    for sig, handler in previous.items():
+        signal.signal(sig, handler)

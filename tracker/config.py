@@ -1,0 +1,111 @@
+"""Every tunable of the vision pipeline, typed, with its default, in one place.
+
+A recording stores ``TrackerConfig.to_dict()`` so a replay rebuilds exactly the
+same pipeline with ``TrackerConfig.from_dict``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+
+from tracker.errors import BadInput
+
+
+@dataclass(frozen=True)
+class SegmentConfig:
+    # |frame - background| above this (grey levels) is foreground.
+    diff_threshold: int = 30
+    # |frame - previous frame| above this is motion; background learns only where still.
+    motion_threshold: int = 12
+    # Learning rate of the empty-belt reference where nothing moves.
+    background_rate: float = 0.1
+    # The reference is refreshed every N frames (amortises the cost of learning).
+    background_every: int = 4
+    # A foreground blob with no motion in it for this many frames joins the background
+    # (a parked part, or a ghost left where a part sat when the reference was taken).
+    absorb_after_frames: int = 90
+    # Side of the square opening kernel that removes noise speckles from the mask.
+    open_kernel_px: int = 3
+
+    def __post_init__(self) -> None:
+        _positive(self, "diff_threshold", "motion_threshold", "background_every",
+                  "absorb_after_frames", "open_kernel_px")
+        if not 0 < self.background_rate <= 1:
+            raise BadInput(f"background_rate: expected 0 < rate <= 1, got {self.background_rate}")
+
+
+@dataclass(frozen=True)
+class MeasureConfig:
+    # Blobs smaller than this on the belt are not parts.
+    min_area_mm2: float = 300.0
+    # Outlines are measured on the plane this high above the belt (0 for flat parts).
+    part_height_mm: float = 0.0
+    # A blob within this many pixels of the image border is clipped: not a measurement.
+    border_margin_px: int = 2
+    # Locate edges from grey levels (sub-pixel) instead of the binary mask's staircase.
+    subpixel: bool = True
+    # Pixels around a blob's bounding box that are examined for its edges.
+    roi_margin_px: int = 4
+    # Points within this many pixels of a fitted side (and away from corners) refine it.
+    side_band_px: float = 1.5
+    # Minimum |part - belt| contrast (grey levels) for a sub-pixel measurement.
+    min_contrast: float = 20.0
+
+    def __post_init__(self) -> None:
+        _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast")
+        if self.part_height_mm < 0:
+            raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
+
+
+@dataclass(frozen=True)
+class TrackConfig:
+    # Measurement noise (1 sigma) of centroid, angle and side lengths.
+    position_sigma_mm: float = 0.08
+    angle_sigma_deg: float = 0.1
+    size_sigma_mm: float = 0.1
+    # Process noise: how hard parts may accelerate / turn / change apparent size.
+    accel_sigma_mm_s2: float = 2000.0
+    angular_accel_sigma_deg_s2: float = 200.0
+    size_rate_sigma_mm_s: float = 1.0
+    # Prior uncertainty of a new track's velocity (it is unknown at birth).
+    initial_velocity_sigma_mm_s: float = 1000.0
+    initial_angular_rate_sigma_deg_s: float = 100.0
+    # A measurement farther than this from a track's prediction starts a new track.
+    gate_mm: float = 30.0
+    # A track with no blob at all for this many frames ends.
+    max_missed_frames: int = 5
+
+    def __post_init__(self) -> None:
+        _positive(self, *(f.name for f in fields(self)))
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    segment: SegmentConfig = field(default_factory=SegmentConfig)
+    measure: MeasureConfig = field(default_factory=MeasureConfig)
+    track: TrackConfig = field(default_factory=TrackConfig)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> TrackerConfig:
+        def build(kind, values):
+            known = {f.name for f in fields(kind)}
+            unknown = set(values) - known
+            if unknown:
+                raise BadInput(f"{kind.__name__}: unknown settings {sorted(unknown)}")
+            return kind(**values)
+
+        return cls(
+            segment=build(SegmentConfig, data.get("segment", {})),
+            measure=build(MeasureConfig, data.get("measure", {})),
+            track=build(TrackConfig, data.get("track", {})),
+        )
+
+
+def _positive(obj: object, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        if not value > 0:
+            raise BadInput(f"{type(obj).__name__}.{name}: expected > 0, got {value}")

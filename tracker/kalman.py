@@ -1,0 +1,47 @@
+"""Kalman filter factory: a part's pose, velocity, angle and size (filterpy).
+
+State  x = [x_mm, y_mm, vx_mm_s, vy_mm_s, angle_deg, omega_deg_s, length_mm, width_mm]
+Measured z = [x_mm, y_mm, angle_deg, length_mm, width_mm]
+Position and angle move at constant (noisy) rates; the sizes are constant up to a
+slow random walk (a part's apparent size changes only through noise).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from filterpy.common import Q_discrete_white_noise
+from filterpy.kalman import KalmanFilter
+
+from tracker.config import TrackConfig
+
+X, Y, VX, VY, ANGLE, OMEGA, LENGTH, WIDTH = range(8)
+
+
+def make_filter(z: np.ndarray, cfg: TrackConfig) -> KalmanFilter:
+    """A filter initialised at measurement ``z``, velocity unknown."""
+    kf = KalmanFilter(dim_x=8, dim_z=5)
+    kf.H = np.zeros((5, 8))
+    for row, col in enumerate((X, Y, ANGLE, LENGTH, WIDTH)):
+        kf.H[row, col] = 1.0
+    p, a, s = cfg.position_sigma_mm**2, cfg.angle_sigma_deg**2, cfg.size_sigma_mm**2
+    kf.R = np.diag([p, p, a, s, s])
+    kf.x = np.array([[z[0]], [z[1]], [0.0], [0.0], [z[2]], [0.0], [z[3]], [z[4]]])
+    v0, w0 = cfg.initial_velocity_sigma_mm_s**2, cfg.initial_angular_rate_sigma_deg_s**2
+    # A new part's velocity is unknown: a wide prior lets the second measurement set it.
+    kf.P = np.diag([p, p, v0, v0, a, w0, s, s])
+    return kf
+
+
+def set_interval(kf: KalmanFilter, dt_s: float, cfg: TrackConfig) -> None:
+    """Transition and process noise for a step of ``dt_s`` seconds (frames need not be evenly spaced)."""
+    f = np.eye(8)
+    f[X, VX] = f[Y, VY] = f[ANGLE, OMEGA] = dt_s
+    kf.F = f
+    q = np.zeros((8, 8))
+    # Piecewise-constant white acceleration for each (position, rate) pair.
+    for pos, rate, sigma in ((X, VX, cfg.accel_sigma_mm_s2), (Y, VY, cfg.accel_sigma_mm_s2),
+                             (ANGLE, OMEGA, cfg.angular_accel_sigma_deg_s2)):
+        block = Q_discrete_white_noise(dim=2, dt=dt_s, var=sigma**2)
+        q[np.ix_((pos, rate), (pos, rate))] = block
+    q[LENGTH, LENGTH] = q[WIDTH, WIDTH] = (cfg.size_rate_sigma_mm_s * dt_s) ** 2
+    kf.Q = q

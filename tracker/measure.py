@@ -1,0 +1,144 @@
+"""Measurement: blobs of the foreground mask -> rectangles on the belt, in millimetres.
+
+Edges are located from grey levels: within a blob's neighbourhood each pixel's
+value, compared with the belt reference and the part's own level, is the
+fraction of the pixel the part covers. Along a row (or column) crossing a
+straight edge, the covered fractions add up to exactly where the edge crosses
+that row, so each crossing gives one sub-pixel edge point. The points are
+undistorted, mapped onto the belt and fitted with a rectangle there, where a
+rectangle is still a rectangle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from tracker.config import MeasureConfig
+from tracker.geometry import Rect, min_area_rect, refine_rect
+from tracker.undistort import BeltMapper
+
+# Pixels on each side of a crossing that the coverage sum spans (covers blur up to ~4 px).
+_HALF_WINDOW = 3
+_ERODE = cv2.getStructuringElement(cv2.MORPH_RECT, (5, 5))
+_ZONE = cv2.getStructuringElement(cv2.MORPH_RECT, (7, 7))
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One blob measured in one frame."""
+
+    rect: Rect
+    # Touches the image border: part of it may be outside, so its geometry is not trusted.
+    clipped: bool
+    bbox_px: tuple[int, int, int, int]
+    # Image pixel of the centroid (for drawing), distorted coordinates.
+    centroid_px: tuple[float, float]
+    edge_points: int
+
+
+class Measurer:
+    def __init__(self, mapper: BeltMapper, config: MeasureConfig) -> None:
+        self.mapper = mapper
+        self.config = config
+        self._width, self._height = mapper.calibration.size
+        # Conservative pixel-area pre-filter, so tiny specks are never mapped at all.
+        self._min_area_px = 0.5 * config.min_area_mm2 / mapper.max_mm_per_px() ** 2
+        self._mm_per_px = mapper.calibration.mm_per_px_at_centre()
+
+    def __call__(self, frame: np.ndarray, background: np.ndarray, mask: np.ndarray) -> list[Measurement]:
+        contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        found = []
+        for contour in contours:
+            if cv2.contourArea(contour) < self._min_area_px:
+                continue
+            m = self._measure(frame, background, contour)
+            if m is not None:
+                found.append(m)
+        # Deterministic order for the tracker: left to right, top to bottom in the image.
+        found.sort(key=lambda m: (m.bbox_px[0], m.bbox_px[1]))
+        return found
+
+    def _measure(self, frame, background, contour) -> Measurement | None:
+        cfg = self.config
+        x, y, w, h = cv2.boundingRect(contour)
+        b = cfg.border_margin_px
+        clipped = x < b or y < b or x + w > self._width - b or y + h > self._height - b
+        outline = contour.reshape(-1, 2).astype(np.float64)
+        outline_mm = self.mapper.to_mm(outline)
+        hull = cv2.convexHull(outline_mm.astype(np.float32)).reshape(-1, 2)
+        area_mm2 = cv2.contourArea(hull)
+        if area_mm2 < cfg.min_area_mm2:
+            return None
+        points_px = None
+        if cfg.subpixel and not clipped:
+            points_px = self._edge_points(frame, background, contour, (x, y, w, h))
+        if points_px is None or len(points_px) < 12:
+            # Binary staircase: boundary pixel centres sit half a pixel inside the edge.
+            points_px = outline
+            rect = min_area_rect(outline_mm)
+        else:
+            pts_mm = self.mapper.to_mm(points_px)
+            rect = refine_rect(pts_mm, min_area_rect(pts_mm), band=cfg.side_band_px * self._mm_per_px)
+        centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
+        return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px))
+
+    def _edge_points(self, frame, background, contour, bbox) -> np.ndarray | None:
+        cfg = self.config
+        x, y, w, h = bbox
+        m = cfg.roi_margin_px
+        x0, y0 = max(0, x - m), max(0, y - m)
+        x1, y1 = min(self._width, x + w + m), min(self._height, y + h + m)
+        img = frame[y0:y1, x0:x1].astype(np.float32)
+        ref = background[y0:y1, x0:x1].astype(np.float32)
+        blob = np.zeros(img.shape, dtype=np.uint8)
+        cv2.drawContours(blob, [contour], -1, 255, thickness=cv2.FILLED, offset=(-x0, -y0))
+        zone = cv2.dilate(blob, _ZONE)
+        belt = zone == 0
+        inner = cv2.erode(blob, _ERODE) > 0
+        if belt.sum() < 16 or inner.sum() < 16:
+            return None
+        # Lighting gain of this frame against the reference, from the belt around the blob.
+        gain = float(np.median(img[belt] / np.maximum(ref[belt], 1.0)))
+        diff = img - gain * ref
+        contrast = float(np.median(diff[inner]))
+        if abs(contrast) < cfg.min_contrast:
+            return None
+        cover = diff / contrast
+        in_zone = zone > 0
+        pts = [_crossings(cover, in_zone), _crossings(cover.T, in_zone.T)[:, ::-1]]
+        points = np.concatenate(pts)
+        if points.size == 0:
+            return None
+        return points + [x0, y0]
+
+
+def _crossings(cover: np.ndarray, zone: np.ndarray) -> np.ndarray:
+    """Sub-pixel edge crossings along rows of ``cover``: Nx2 (col, row).
+
+    Only edges closer to vertical than to horizontal are taken here (their
+    transition along a row is short); the transposed call takes the others.
+    """
+    k = _HALF_WINDOW
+    rows, cols = cover.shape
+    if cols < 2 * k + 2 or rows < 3:
+        return np.zeros((0, 2))
+    c0, c1 = cover[:, :-1], cover[:, 1:]
+    cross = ((c0 - 0.5) * (c1 - 0.5) < 0) & zone[:, :-1] & zone[:, 1:]
+    # Keep the window inside the ROI and away from the first/last row (for the gradient).
+    cross[:, : k - 1] = False
+    cross[:, cols - 1 - k :] = False
+    cross[0, :] = cross[-1, :] = False
+    r, j = np.nonzero(cross)
+    gx = cover[r, j + 1] - cover[r, j]
+    gy = 0.5 * (cover[r + 1, j] + cover[r + 1, j + 1] - cover[r - 1, j] - cover[r - 1, j + 1])
+    steep = np.abs(gx) >= np.abs(gy)
+    r, j, gx = r[steep], j[steep], gx[steep]
+    offsets = np.arange(-k + 1, k + 1)
+    window = cover[r[:, None], j[:, None] + offsets]
+    left = j - k + 0.5  # left boundary of the window's first pixel
+    rising = gx > 0  # part on the right: the uncovered length is the edge's distance
+    length = np.where(rising, (1.0 - window).sum(axis=1), window.sum(axis=1))
+    return np.column_stack([left + length, r.astype(np.float64)])

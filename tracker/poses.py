@@ -1,0 +1,82 @@
+"""What the pipeline produces per frame, and the pose stream of contract section 2."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from typing import IO
+
+import numpy as np
+
+from tracker.errors import BadInput
+from tracker.measure import Measurement
+
+# Decimals written to the pose stream: 0.1 um and 1e-4 deg are far below what is measurable.
+_MM_DECIMALS = 4
+_T_DECIMALS = 9
+
+
+@dataclass(frozen=True)
+class TrackedObject:
+    id: int
+    x_mm: float
+    y_mm: float
+    angle_deg: float
+    length_mm: float
+    width_mm: float
+    corners_mm: np.ndarray  # 4x2, counter-clockwise (positive signed area)
+    vx_mm_s: float
+    vy_mm_s: float
+    measured: bool
+    # The raw measurement of this frame before filtering (None when predicted).
+    raw: Measurement | None = field(default=None, compare=False)
+
+    def to_dict(self) -> dict:
+        r = _MM_DECIMALS
+        return {
+            "id": self.id,
+            "x_mm": round(self.x_mm, r), "y_mm": round(self.y_mm, r),
+            "angle_deg": round(self.angle_deg, r),
+            "length_mm": round(self.length_mm, r), "width_mm": round(self.width_mm, r),
+            "corners_mm": [[round(float(x), r), round(float(y), r)] for x, y in self.corners_mm],
+            "vx_mm_s": round(self.vx_mm_s, r), "vy_mm_s": round(self.vy_mm_s, r),
+            "measured": self.measured,
+        }
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    frame: int
+    t_ns: int
+    objects: tuple[TrackedObject, ...]
+    measurements: tuple[Measurement, ...] = ()
+
+    def to_dict(self) -> dict:
+        return {"frame": self.frame, "t": round(self.t_ns / 1e9, _T_DECIMALS),
+                "objects": [o.to_dict() for o in self.objects]}
+
+    def to_json_line(self) -> str:
+        return json.dumps(self.to_dict(), allow_nan=False, separators=(", ", ": ")) + "\n"
+
+
+class PoseWriter:
+    """Writes the JSON Lines pose stream; buffered, so the loop does not wait per line."""
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = str(path)
+        try:
+            self._file: IO[str] = open(path, "w", encoding="utf-8", buffering=1 << 16)  # noqa: SIM115
+        except OSError as exc:
+            raise BadInput(f"{path}: cannot write the pose stream: {exc.strerror}") from None
+
+    def write(self, result: FrameResult) -> None:
+        self._file.write(result.to_json_line())
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def read_poses(path: str | os.PathLike) -> list[dict]:
+    with open(path, encoding="utf-8") as f:
+        return [json.loads(line) for line in f if line.strip()]

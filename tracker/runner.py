@@ -1,0 +1,211 @@
+"""The real-time loop: source -> pipeline -> sinks, with health and a live status line.
+
+Sinks (pose file, PLC writer, recorder) take each result; the PLC writer and the
+recorder hand it to their own threads, so the loop never waits on the network
+and waits on the disk only when the recorder's bounded queue is full.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Protocol, TextIO
+
+import numpy as np
+
+from tracker.errors import FrameSizeError, SourceLost, TrackerError
+from tracker.pipeline import Pipeline
+from tracker.poses import FrameResult, PoseWriter
+from tracker.sources import Frame, FrameSource
+
+log = logging.getLogger(__name__)
+
+# Fault codes of the PLC's fault word (contract section 4).
+FAULT_NONE, FAULT_CAMERA_LOST, FAULT_FRAME_SIZE, FAULT_RECORDING, FAULT_OVERRUN = range(5)
+STATUS_PERIOD_S = 0.25
+# Loop times kept for percentiles (a ring: memory stays flat over any run length).
+_LOOP_WINDOW = 4096
+
+
+@dataclass
+class Health:
+    """What the status word and the status line report; written by the loop and the sinks."""
+
+    running: bool = True
+    camera_ok: bool = True
+    calibration_loaded: bool = True
+    part_tracked: bool = False
+    recording_ok: bool = True
+    fault: int = FAULT_NONE
+    overruns: int = 0
+
+    def set_fault(self, code: int) -> None:
+        # The most serious (lowest non-zero) fault wins.
+        if self.fault == FAULT_NONE or code < self.fault:
+            self.fault = code
+
+
+class Sink(Protocol):
+    def submit(self, frame: Frame, result: FrameResult) -> None: ...
+
+    def status(self) -> str: ...
+
+    def close(self) -> None: ...
+
+
+class PoseSink:
+    def __init__(self, path: str) -> None:
+        self._writer = PoseWriter(path)
+
+    def submit(self, frame: Frame, result: FrameResult) -> None:
+        self._writer.write(result)
+
+    def status(self) -> str:
+        return ""
+
+    def close(self) -> None:
+        self._writer.close()
+
+
+@dataclass
+class RunSummary:
+    frames: int = 0
+    seconds: float = 0.0
+    track_ids: set[int] = field(default_factory=set)
+    measured: int = 0
+    loop_ms_p50: float = 0.0
+    loop_ms_p99: float = 0.0
+    overruns: int = 0
+    stopped_by: str = "end of source"
+
+    def line(self) -> str:
+        fps = self.frames / self.seconds if self.seconds > 0 else 0.0
+        return (
+            f"{self.frames} frames in {self.seconds:.2f} s ({fps:.1f} fps), {len(self.track_ids)} parts tracked, "
+            f"{self.measured} measurements, loop p50 {self.loop_ms_p50:.2f} ms p99 {self.loop_ms_p99:.2f} ms, "
+            f"{self.overruns} overruns; stopped by {self.stopped_by}"
+        )
+
+
+class StatusLine:
+    """One live line on a terminal (carriage return), a line per second elsewhere."""
+
+    def __init__(self, out: TextIO) -> None:
+        self._out = out
+        self._tty = out.isatty()
+        self._period = STATUS_PERIOD_S if self._tty else 1.0
+        self._next = 0.0
+        self._width = 0
+
+    def show(self, text: str, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now < self._next:
+            return
+        self._next = now + self._period
+        if self._tty:
+            self._out.write("\r" + text.ljust(self._width))
+            self._width = len(text)
+        else:
+            self._out.write(text + "\n")
+        self._out.flush()
+
+    def end(self) -> None:
+        if self._tty and self._width:
+            self._out.write("\n")
+            self._out.flush()
+
+
+def describe(result: FrameResult) -> str:
+    if not result.objects:
+        return "no part"
+    o = result.objects[0]
+    flag = "" if o.measured else " (predicted)"
+    return f"#{o.id} x={o.x_mm:.1f} y={o.y_mm:.1f} a={o.angle_deg:.1f}{flag}"
+
+
+class Runner:
+    def __init__(self, source: FrameSource, pipeline: Pipeline, sinks: list[Sink],
+                 health: Health | None = None, status: StatusLine | None = None,
+                 stop: threading.Event | None = None, max_frames: int | None = None) -> None:
+        self.source = source
+        self.pipeline = pipeline
+        self.sinks = sinks
+        self.health = health or Health()
+        self.status = status
+        self.stop = stop or threading.Event()
+        self.max_frames = max_frames
+        self.summary = RunSummary()
+
+    def run(self) -> RunSummary:
+        calib = self.pipeline.calibration
+        health, summary = self.health, self.summary
+        loop_ns = np.zeros(_LOOP_WINDOW, dtype=np.int64)
+        started = time.monotonic()
+        fps_t, fps_n, fps = started, 0, 0.0
+        try:
+            for frame in self.source:
+                h, w = frame.image.shape[:2]
+                if (w, h) != calib.size:
+                    health.set_fault(FAULT_FRAME_SIZE)
+                    calib.check_frame_size(w, h, f"{self.source.name} frame {frame.index}")
+                t0 = time.perf_counter_ns()
+                result = self.pipeline.process(frame.index, frame.image, frame.t_ns)
+                health.part_tracked = bool(result.objects)
+                health.overruns = self.source.overruns
+                if self.source.overruns:
+                    health.set_fault(FAULT_OVERRUN)
+                for sink in self.sinks:
+                    sink.submit(frame, result)
+                this_loop_ns = time.perf_counter_ns() - t0
+                loop_ns[summary.frames % _LOOP_WINDOW] = this_loop_ns
+                summary.frames += 1
+                summary.track_ids.update(o.id for o in result.objects)
+                summary.measured += sum(o.measured for o in result.objects)
+                fps_n += 1
+                now = time.monotonic()
+                if now - fps_t >= 0.5:
+                    fps, fps_t, fps_n = fps_n / (now - fps_t), now, 0
+                if self.status:
+                    parts = [f"frame {frame.index}", f"{fps:.0f} fps", f"loop {this_loop_ns / 1e6:.2f} ms",
+                             f"objects {len(result.objects)}", describe(result)]
+                    parts += [s for s in (sink.status() for sink in self.sinks) if s]
+                    if self.source.overruns:
+                        parts.append(f"overruns {self.source.overruns}")
+                    self.status.show(" | ".join(parts))
+                if self.stop.is_set():
+                    summary.stopped_by = "signal"
+                    break
+                if self.max_frames is not None and summary.frames >= self.max_frames:
+                    summary.stopped_by = "--max-frames"
+                    break
+        except SourceLost:
+            health.camera_ok = False
+            health.set_fault(FAULT_CAMERA_LOST)
+            raise
+        except FrameSizeError:
+            raise
+        finally:
+            health.running = False
+            summary.seconds = time.monotonic() - started
+            summary.overruns = self.source.overruns
+            n = min(summary.frames, _LOOP_WINDOW)
+            if n:
+                summary.loop_ms_p50 = float(np.percentile(loop_ns[:n], 50) / 1e6)
+                summary.loop_ms_p99 = float(np.percentile(loop_ns[:n], 99) / 1e6)
+            if self.status:
+                self.status.end()
+            self._close_all()
+        return summary
+
+    def _close_all(self) -> None:
+        errors = []
+        for sink in self.sinks:
+            try:
+                sink.close()
+            except TrackerError as exc:
+                errors.append(exc)
+        self.source.close()
+        if errors:
+            raise errors[0]

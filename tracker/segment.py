@@ -1,0 +1,69 @@
+"""Segmentation: what differs from the empty belt, with the belt's reference kept up to date.
+
+Differencing against a reference of the empty belt measures the part where it
+is *now*; differencing consecutive frames would give the union of its outlines
+at t and t-1 (half a frame of lag). Consecutive differences are used only to
+tell where things move, so that the reference learns where nothing does.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from tracker.config import SegmentConfig
+
+
+class Segmenter:
+    """Frame in, foreground mask out; ``background`` is the reference used for that frame."""
+
+    def __init__(self, config: SegmentConfig) -> None:
+        self.config = config
+        self._kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (config.open_kernel_px,) * 2)
+        # Guard band around moving/foreground pixels: blur fringes fainter than the
+        # threshold must not leak into the reference.
+        self._guard = cv2.getStructuringElement(cv2.MORPH_RECT, (7, 7))
+        self._count = 0
+        self._prev: np.ndarray | None = None
+        self._reference: np.ndarray | None = None  # float32, learnt
+        self._still_frames: np.ndarray | None = None  # uint16, per pixel
+        self.background: np.ndarray | None = None  # uint8 view of the reference
+
+    def __call__(self, frame: np.ndarray) -> np.ndarray:
+        cfg = self.config
+        if self._reference is None:
+            self._reference = frame.astype(np.float32)
+            self._still_frames = np.zeros(frame.shape, dtype=np.uint16)
+            self.background = frame.copy()
+            self._prev = frame
+            self._count = 1
+            return np.zeros(frame.shape, dtype=np.uint8)
+        _, fg = cv2.threshold(cv2.absdiff(frame, self.background), cfg.diff_threshold, 255, cv2.THRESH_BINARY)
+        mask = cv2.morphologyEx(fg, cv2.MORPH_OPEN, self._kernel)
+        if self._count % cfg.background_every == 0:
+            self._learn(frame, fg)
+        self._prev = frame
+        self._count += 1
+        return mask
+
+    def _learn(self, frame: np.ndarray, fg: np.ndarray) -> None:
+        cfg = self.config
+        _, moving = cv2.threshold(cv2.absdiff(frame, self._prev), cfg.motion_threshold, 255, cv2.THRESH_BINARY)
+        moving = cv2.dilate(moving, self._guard)
+        busy = cv2.dilate(cv2.bitwise_or(fg, moving), self._guard)
+        cv2.accumulateWeighted(frame, self._reference, cfg.background_rate, mask=cv2.bitwise_not(busy))
+        # A foreground blob with no motion anywhere in it is a parked part or a ghost (what
+        # the reference held when a part left): count how long; past the limit it is belt.
+        count, labels = cv2.connectedComponents(fg, connectivity=8)
+        moving_blobs = np.zeros(count, dtype=bool)
+        moving_blobs[np.unique(labels[moving > 0])] = True
+        moving_blobs[0] = True  # label 0 is the belt itself
+        parked = ~moving_blobs[labels]
+        still = self._still_frames
+        still[~parked] = 0
+        still[parked] += cfg.background_every
+        absorb = still >= cfg.absorb_after_frames
+        if absorb.any():
+            self._reference[absorb] = frame[absorb]
+            still[absorb] = 0
+        self.background = cv2.convertScaleAbs(self._reference)

@@ -1,0 +1,195 @@
+"""Frame sources: the edge of the system that touches cameras and files.
+
+Every source yields ``Frame``s of 8-bit grey images with a capture time in
+integer nanoseconds (``t_ns``: the source's own clock, which is what the
+pipeline sees) and the tracker's monotonic time when the frame arrived
+(``arrival_ns``: for latency and the PLC's t_capture_ms).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from tracker.errors import SourceError, SourceLost
+
+log = logging.getLogger(__name__)
+
+DEFAULT_SEQUENCE_FPS = 30.0
+# A live camera that delivers nothing for this long is lost.
+CAMERA_TIMEOUT_S = 2.0
+
+
+@dataclass(frozen=True)
+class Frame:
+    index: int
+    t_ns: int
+    image: np.ndarray
+    arrival_ns: int = 0
+
+
+def to_gray(image: np.ndarray, where: str) -> np.ndarray:
+    if image.dtype != np.uint8:
+        raise SourceError(f"{where}: expected 8-bit frames, got {image.dtype}")
+    if image.ndim == 2:
+        return image
+    if image.ndim == 3 and image.shape[2] == 3:
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    if image.ndim == 3 and image.shape[2] == 4:
+        return cv2.cvtColor(image, cv2.COLOR_BGRA2GRAY)
+    if image.ndim == 3 and image.shape[2] == 1:
+        return image[:, :, 0]
+    raise SourceError(f"{where}: expected a grey or colour image, got shape {image.shape}")
+
+
+class FrameSource:
+    """Base class: iterate for frames; ``live`` sources pace themselves, files do not."""
+
+    name: str = "?"
+    live: bool = False
+    # Frames the camera delivered that the loop could not take (live sources only).
+    overruns: int = 0
+
+    def __iter__(self) -> Iterator[Frame]:
+        raise NotImplementedError
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        pass
+
+
+class VideoFileSource(FrameSource):
+    def __init__(self, path: str, fps: float | None = None) -> None:
+        self.name = path
+        if not os.path.isfile(path):
+            raise SourceError(f"{path}: video file not found")
+        self._cap = cv2.VideoCapture(path)
+        if not self._cap.isOpened():
+            raise SourceError(f"{path}: cannot open as a video (unknown format or codec)")
+        container_fps = self._cap.get(cv2.CAP_PROP_FPS)
+        self._fps = fps
+        if fps is None and not (container_fps and container_fps > 0):
+            log.warning("%s: no frame rate in the container; assuming %.0f fps (use --fps)", path, DEFAULT_SEQUENCE_FPS)
+            self._fps = DEFAULT_SEQUENCE_FPS
+
+    def __iter__(self) -> Iterator[Frame]:
+        index = 0
+        while True:
+            ok, image = self._cap.read()
+            if not ok:
+                return
+            if self._fps is not None:
+                t_ns = round(index * 1e9 / self._fps)
+            else:
+                t_ns = round(self._cap.get(cv2.CAP_PROP_POS_MSEC) * 1e6)
+            yield Frame(index, t_ns, to_gray(image, f"{self.name} frame {index}"), time.monotonic_ns())
+            index += 1
+
+    def close(self) -> None:
+        self._cap.release()
+
+
+class ImageSequenceSource(FrameSource):
+    """A printf-style pattern such as ``frames/%05d.png``, numbered from 0 (or 1)."""
+
+    def __init__(self, pattern: str, fps: float | None = None) -> None:
+        self.name = pattern
+        try:
+            first = [i for i in (0, 1) if os.path.isfile(pattern % i)]
+        except (TypeError, ValueError):
+            raise SourceError(f"{pattern}: not a valid printf-style image pattern (e.g. frames/%05d.png)") from None
+        if not first:
+            raise SourceError(f"{pattern}: no image found ({pattern % 0} or {pattern % 1})")
+        self._start = first[0]
+        if fps is None:
+            log.warning("%s: image sequence without --fps; assuming %.0f fps", pattern, DEFAULT_SEQUENCE_FPS)
+        self._fps = fps or DEFAULT_SEQUENCE_FPS
+
+    def __iter__(self) -> Iterator[Frame]:
+        index = 0
+        while True:
+            path = self.name % (self._start + index)
+            if not os.path.isfile(path):
+                return
+            image = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+            if image is None:
+                raise SourceError(f"{path}: cannot read the image")
+            yield Frame(index, round(index * 1e9 / self._fps), to_gray(image, path), time.monotonic_ns())
+            index += 1
+
+
+class CameraSource(FrameSource):
+    """A live camera. A grabber thread keeps only the newest frame: the loop never sees a
+    stale, buffered frame; frames it replaced before the loop took them are overruns."""
+
+    live = True
+
+    def __init__(self, index: int, fps: float | None = None) -> None:
+        self.name = f"camera {index}"
+        self._cap = cv2.VideoCapture(index)
+        if not self._cap.isOpened():
+            raise SourceError(f"camera {index}: cannot open (no such device, or it is busy)")
+        if fps:
+            self._cap.set(cv2.CAP_PROP_FPS, fps)
+        self._cap.set(cv2.CAP_PROP_BUFFERSIZE, 1)
+        self._cond = threading.Condition()
+        self._latest: tuple[int, np.ndarray] | None = None
+        self._failed = False
+        self._running = True
+        self._thread = threading.Thread(target=self._grab, name="camera", daemon=True)
+        self._thread.start()
+
+    def _grab(self) -> None:
+        while self._running:
+            ok, image = self._cap.read()
+            now = time.monotonic_ns()
+            with self._cond:
+                if not ok:
+                    self._failed = True
+                    self._cond.notify_all()
+                    return
+                if self._latest is not None:
+                    self.overruns += 1
+                self._latest = (now, image)
+                self._cond.notify_all()
+
+    def __iter__(self) -> Iterator[Frame]:
+        index = 0
+        while self._running:
+            with self._cond:
+                ready = self._cond.wait_for(lambda: self._latest is not None or self._failed, CAMERA_TIMEOUT_S)
+                if self._latest is None:
+                    if not self._running:
+                        return
+                    why = "stopped delivering frames" if self._failed or ready else f"no frame for {CAMERA_TIMEOUT_S} s"
+                    raise SourceLost(f"{self.name}: {why}")
+                now, image = self._latest
+                self._latest = None
+            yield Frame(index, now, to_gray(image, self.name), now)
+            index += 1
+
+    def close(self) -> None:
+        self._running = False
+        self._thread.join(timeout=CAMERA_TIMEOUT_S)
+        self._cap.release()
+
+
+def open_source(spec: str, fps: float | None = None) -> FrameSource:
+    """Camera index, video file, printf image pattern or ``.mcap`` recording."""
+    if fps is not None and not fps > 0:
+        raise SourceError(f"--fps: expected a positive number, got {fps}")
+    if spec.isdigit():
+        return CameraSource(int(spec), fps)
+    if spec.lower().endswith(".mcap"):
+        from tracker.recording.source import McapSource  # noqa: PLC0415 - optional edge
+
+        return McapSource(spec, fps)
+    if "%" in spec:
+        return ImageSequenceSource(spec, fps)
+    return VideoFileSource(spec, fps)

@@ -1,0 +1,118 @@
+"""Tracking: measurements of one frame -> filtered objects with stable ids."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from tracker.config import TrackConfig
+from tracker.geometry import rectangle_corners, wrap_angle_deg
+from tracker.kalman import ANGLE, LENGTH, VX, VY, WIDTH, X, Y, make_filter, set_interval
+from tracker.measure import Measurement
+from tracker.poses import TrackedObject
+
+
+class Track:
+    def __init__(self, track_id: int, m: Measurement, t_ns: int, cfg: TrackConfig) -> None:
+        r = m.rect
+        self.id = track_id
+        self.kf = make_filter(np.array([r.x_mm, r.y_mm, r.angle_deg, r.length_mm, r.width_mm]), cfg)
+        self.t_ns = t_ns
+        self.missed = 0
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.kf.x[[X, Y], 0]
+
+    def predict(self, t_ns: int, cfg: TrackConfig) -> None:
+        if t_ns > self.t_ns:
+            set_interval(self.kf, (t_ns - self.t_ns) / 1e9, cfg)
+            self.kf.predict()
+            self.t_ns = t_ns
+            self._normalise()
+
+    def update(self, m: Measurement) -> None:
+        r = m.rect
+        predicted = float(self.kf.x[ANGLE, 0])
+        # The rectangle's two axes are both candidates for the tracked "long side":
+        # take the one nearer the prediction, so near-square parts do not flip by 90 deg.
+        d_long = wrap_angle_deg(r.angle_deg - predicted)
+        d_short = wrap_angle_deg(r.angle_deg + 90.0 - predicted)
+        if abs(d_long) <= abs(d_short):
+            z = [r.x_mm, r.y_mm, predicted + d_long, r.length_mm, r.width_mm]
+        else:
+            z = [r.x_mm, r.y_mm, predicted + d_short, r.width_mm, r.length_mm]
+        self.kf.update(np.array(z, dtype=np.float64).reshape(5, 1))
+        self._normalise()
+
+    def _normalise(self) -> None:
+        """Keep the angle in (-90, 90] and the length the longer side (180 deg symmetry)."""
+        x = self.kf.x
+        if x[WIDTH, 0] > x[LENGTH, 0]:
+            order = list(range(8))
+            order[LENGTH], order[WIDTH] = WIDTH, LENGTH
+            self.kf.x = x[order]
+            self.kf.P = self.kf.P[np.ix_(order, order)]
+            self.kf.x[ANGLE, 0] += 90.0
+        self.kf.x[ANGLE, 0] = wrap_angle_deg(float(self.kf.x[ANGLE, 0]))
+
+    def output(self, measured: Measurement | None) -> TrackedObject:
+        x = self.kf.x[:, 0]
+        corners = rectangle_corners(x[X], x[Y], x[ANGLE], x[LENGTH], x[WIDTH])
+        return TrackedObject(
+            self.id, float(x[X]), float(x[Y]), float(x[ANGLE]), float(x[LENGTH]), float(x[WIDTH]),
+            corners, float(x[VX]), float(x[VY]), measured is not None, measured,
+        )
+
+
+class Tracker:
+    """Greedy nearest-neighbour association of measurements to Kalman tracks."""
+
+    def __init__(self, config: TrackConfig) -> None:
+        self.config = config
+        self.tracks: list[Track] = []
+        self._next_id = 1
+
+    def step(self, measurements: list[Measurement], t_ns: int) -> tuple[TrackedObject, ...]:
+        cfg = self.config
+        for track in self.tracks:
+            track.predict(t_ns, cfg)
+        pairs = []
+        for ti, track in enumerate(self.tracks):
+            for mi, m in enumerate(measurements):
+                d = math.dist(track.position, (m.rect.x_mm, m.rect.y_mm))
+                # A clipped blob's centre is off the part's: allow for half the part.
+                gate = cfg.gate_mm + (float(track.kf.x[LENGTH, 0]) / 2 if m.clipped else 0.0)
+                if d <= gate:
+                    pairs.append((d, ti, mi))
+        pairs.sort()
+        track_to_m: dict[int, int] = {}
+        used: set[int] = set()
+        for _, ti, mi in pairs:
+            if ti not in track_to_m and mi not in used:
+                track_to_m[ti] = mi
+                used.add(mi)
+        out, alive = [], []
+        for ti, track in enumerate(self.tracks):
+            m = measurements[track_to_m[ti]] if ti in track_to_m else None
+            if m is None:
+                track.missed += 1
+                if track.missed > cfg.max_missed_frames:
+                    continue
+            else:
+                track.missed = 0
+            if m is not None and not m.clipped:
+                track.update(m)
+                out.append(track.output(m))
+            else:
+                out.append(track.output(None))
+            alive.append(track)
+        for mi, m in enumerate(measurements):
+            if mi not in used and not m.clipped:
+                track = Track(self._next_id, m, t_ns, cfg)
+                self._next_id += 1
+                alive.append(track)
+                out.append(track.output(m))
+        self.tracks = alive
+        return tuple(sorted(out, key=lambda o: o.id))
