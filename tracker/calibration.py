@@ -209,8 +209,10 @@ def load(path: str | os.PathLike, require_belt: bool = True) -> Calibration:
         raise CalibrationError(f"{path}: calibration file not found")
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error as exc:
-        first = str(exc).strip().splitlines()[-1] if str(exc).strip() else "parse error"
+    except (cv2.error, SystemError) as exc:
+        # OpenCV's parser reports a syntax error as cv2.error (wrapped in SystemError by some builds).
+        cause = exc.__cause__ or exc
+        first = str(cause).strip().splitlines()[-1] if str(cause).strip() else "parse error"
         raise CalibrationError(f"{path}: not a readable OpenCV FileStorage file ({first})") from None
     if not fs.isOpened():
         raise CalibrationError(f"{path}: not a readable OpenCV FileStorage file")
@@ -235,7 +237,7 @@ def load(path: str | os.PathLike, require_belt: bool = True) -> Calibration:
             n = node(name, optional)
             if n is None:
                 return None
-            m = n.mat()
+            m = n.mat() if n.isMap() else None
             if m is None:
                 raise CalibrationError(f"{where}: {name}: expected a matrix")
             return np.asarray(m, dtype=np.float64)

@@ -72,15 +72,14 @@ def open_inputs(args: argparse.Namespace):
         else:
             source = SyntheticSource(preset("demo"), name="synthetic demo")
             return source, source.calibration, None
+    # The calibration first: a bad one is reported before any camera is opened.
+    calibration = calib_io.load(args.calibration) if args.calibration else None
+    if calibration is None and not args.source.lower().endswith(".mcap"):
+        raise BadInput(f"--calibration is required for source {args.source}")
     source = open_source(args.source, args.fps)
     recorded_config = getattr(source, "config", None)
-    if args.calibration:
-        calibration = calib_io.load(args.calibration)
-    elif getattr(source, "calibration", None) is not None:
+    if calibration is None:
         calibration = source.calibration
-    else:
-        source.close()
-        raise BadInput(f"--calibration is required for source {args.source}")
     return source, calibration, recorded_config
 
 

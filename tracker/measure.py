@@ -22,6 +22,8 @@ from tracker.undistort import BeltMapper
 
 # Pixels on each side of a crossing that the coverage sum spans (covers blur up to ~4 px).
 _HALF_WINDOW = 3
+# A row crossing is used where |d/dx| >= this * |d/dy| (edge within ~63 deg of vertical).
+_STEEP_RATIO = 0.5
 _ERODE = cv2.getStructuringElement(cv2.MORPH_RECT, (5, 5))
 _ZONE = cv2.getStructuringElement(cv2.MORPH_RECT, (7, 7))
 
@@ -118,15 +120,17 @@ class Measurer:
 def _crossings(cover: np.ndarray, zone: np.ndarray) -> np.ndarray:
     """Sub-pixel edge crossings along rows of ``cover``: Nx2 (col, row).
 
-    Only edges closer to vertical than to horizontal are taken here (their
-    transition along a row is short); the transposed call takes the others.
+    Only edges within ~63 deg of vertical are taken here (their transition along
+    a row fits the window); the transposed call takes the others, and near 45 deg
+    both directions contribute.
     """
     k = _HALF_WINDOW
     rows, cols = cover.shape
     if cols < 2 * k + 2 or rows < 3:
         return np.zeros((0, 2))
     c0, c1 = cover[:, :-1], cover[:, 1:]
-    cross = ((c0 - 0.5) * (c1 - 0.5) < 0) & zone[:, :-1] & zone[:, 1:]
+    # Half-open test: a pixel at exactly 0.5 still yields one crossing, never two.
+    cross = ((c0 < 0.5) != (c1 < 0.5)) & zone[:, :-1] & zone[:, 1:]
     # Keep the window inside the ROI and away from the first/last row (for the gradient).
     cross[:, : k - 1] = False
     cross[:, cols - 1 - k :] = False
@@ -134,7 +138,7 @@ def _crossings(cover: np.ndarray, zone: np.ndarray) -> np.ndarray:
     r, j = np.nonzero(cross)
     gx = cover[r, j + 1] - cover[r, j]
     gy = 0.5 * (cover[r + 1, j] + cover[r + 1, j + 1] - cover[r - 1, j] - cover[r - 1, j + 1])
-    steep = np.abs(gx) >= np.abs(gy)
+    steep = np.abs(gx) >= _STEEP_RATIO * np.abs(gy)
     r, j, gx = r[steep], j[steep], gx[steep]
     offsets = np.arange(-k + 1, k + 1)
     window = cover[r[:, None], j[:, None] + offsets]

@@ -10,6 +10,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
+import cv2
 import numpy as np
 
 from tracker.calibration import Calibration
@@ -30,8 +31,10 @@ class Pipeline:
         self.calibration = calibration
         self.config = config or TrackerConfig()
         self.segmenter = Segmenter(self.config.segment)
-        self.measurer = Measurer(BeltMapper(calibration, self.config.measure.part_height_mm), self.config.measure)
-        self.tracker = Tracker(self.config.track)
+        mapper = BeltMapper(calibration, self.config.measure.part_height_mm)
+        self.measurer = Measurer(mapper, self.config.measure)
+        outline = mapper.view_outline_mm().astype(np.float32)
+        self.tracker = Tracker(self.config.track, lambda x, y: cv2.pointPolygonTest(outline, (x, y), False) >= 0)
         # Time spent per stage on the last frame (ns); for the status line and the benchmark only.
         self.stage_ns = dict.fromkeys(STAGES, 0)
         self._clock = clock

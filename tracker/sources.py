@@ -107,11 +107,12 @@ class ImageSequenceSource(FrameSource):
         if not first:
             raise SourceError(f"{pattern}: no image found ({pattern % 0} or {pattern % 1})")
         self._start = first[0]
-        if fps is None:
-            log.warning("%s: image sequence without --fps; assuming %.0f fps", pattern, DEFAULT_SEQUENCE_FPS)
+        self._fps_given = fps is not None
         self._fps = fps or DEFAULT_SEQUENCE_FPS
 
     def __iter__(self) -> Iterator[Frame]:
+        if not self._fps_given:
+            log.warning("%s: image sequence without --fps; assuming %.0f fps", self.name, DEFAULT_SEQUENCE_FPS)
         index = 0
         while True:
             path = self.name % (self._start + index)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -69,8 +70,10 @@ class Track:
 class Tracker:
     """Greedy nearest-neighbour association of measurements to Kalman tracks."""
 
-    def __init__(self, config: TrackConfig) -> None:
+    def __init__(self, config: TrackConfig, in_view: Callable[[float, float], bool] | None = None) -> None:
         self.config = config
+        # Whether a belt point is inside the camera's view: a track predicted out of view ends.
+        self._in_view = in_view or (lambda x, y: True)
         self.tracks: list[Track] = []
         self._next_id = 1
 
@@ -98,7 +101,8 @@ class Tracker:
             m = measurements[track_to_m[ti]] if ti in track_to_m else None
             if m is None:
                 track.missed += 1
-                if track.missed > cfg.max_missed_frames:
+                x, y = track.position
+                if track.missed > cfg.max_missed_frames or not self._in_view(float(x), float(y)):
                     continue
             else:
                 track.missed = 0

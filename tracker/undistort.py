@@ -37,6 +37,15 @@ class BeltMapper:
         norm = cv2.undistortPoints(pts, self._k, self._d, criteria=POINT_CRITERIA)
         return apply_homography(self._h_norm, norm.reshape(-1, 2))
 
+    def view_outline_mm(self, step_px: int = 8) -> np.ndarray:
+        """The image border mapped onto the plane: the polygon of belt the camera sees."""
+        w, h = self.calibration.size
+        top = [(u, 0) for u in range(0, w - 1, step_px)]
+        right = [(w - 1, v) for v in range(0, h - 1, step_px)]
+        bottom = [(u, h - 1) for u in range(w - 1, 0, -step_px)]
+        left = [(0, v) for v in range(h - 1, 0, -step_px)]
+        return self.to_mm(np.array(top + right + bottom + left, dtype=np.float64))
+
     def max_mm_per_px(self, step_px: int = 32) -> float:
         """Largest pixel footprint over the image (for conservative pixel-area pre-filters)."""
         w, h = self.calibration.size
@@ -44,7 +53,8 @@ class BeltMapper:
         p = np.column_stack([u.ravel(), v.ravel()])
         a, b, c = self.to_mm(p), self.to_mm(p + [1, 0]), self.to_mm(p + [0, 1])
         # Square root of the area of one pixel on the belt.
-        area = np.abs(np.cross(b - a, c - a))
+        (ux, uy), (vx, vy) = (b - a).T, (c - a).T
+        area = np.abs(ux * vy - uy * vx)
         return float(np.sqrt(area.max()))
 
 

@@ -1,0 +1,36 @@
+"""Shared fixtures: synthetic scenes are rendered once per session and reused."""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import pytest
+
+from tracker.pipeline import Pipeline
+from tracker.synthetic import Renderer, SceneSpec
+
+ROOT = Path(__file__).resolve().parent.parent
+SHARED_DATA = ROOT.parent / "shared" / "data"
+
+
+@functools.cache
+def rendered(scene: SceneSpec) -> tuple[Renderer, tuple]:
+    """(renderer, ((image, truth), ...)) for every frame of ``scene``; cached for the session."""
+    renderer = Renderer(scene)
+    return renderer, tuple(renderer.render(i) for i in range(scene.n_frames))
+
+
+def run_pipeline(scene: SceneSpec, config=None) -> tuple[list[dict], list[dict]]:
+    """(pose-stream dicts, truth dicts) of the pipeline over a rendered scene."""
+    renderer, frames = rendered(scene)
+    pipeline = Pipeline(renderer.calibration, config)
+    poses = [pipeline.process(i, image, scene.t_ns(i)).to_dict() for i, (image, _) in enumerate(frames)]
+    return poses, [truth for _, truth in frames]
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"../shared/data is absent ({SHARED_DATA}): real-data tests need it")
+    return SHARED_DATA

@@ -1,0 +1,99 @@
+"""``tracker run`` end to end through the real CLI: contract format and exit codes."""
+
+import json
+import math
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from tracker.cli import main
+from tracker.cli_synth import write_scene
+from tracker.evaluate import evaluate
+from tracker.scenes import nadir
+
+
+@pytest.fixture(scope="module")
+def scene_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("scene")
+    scene = nadir(600.0, fps=30.0)
+    write_scene(scene, out)
+    return out
+
+
+def _run(args):
+    return subprocess.run([sys.executable, "-m", "tracker", *args], capture_output=True, text=True, timeout=300)
+
+
+def test_run_writes_the_contract_pose_stream(scene_dir, tmp_path):
+    poses_path = tmp_path / "poses.jsonl"
+    proc = _run(["run", "--source", str(scene_dir / "frames" / "%05d.png"), "--calibration",
+                 str(scene_dir / "calibration.yaml"), "--no-plc", "--poses", str(poses_path), "--fps", "30"])
+    assert proc.returncode == 0, proc.stderr
+    lines = poses_path.read_text(encoding="utf-8").splitlines()
+    truths = [json.loads(line) for line in (scene_dir / "truth.jsonl").read_text().splitlines()]
+    assert len(lines) == len(truths)
+    poses = []
+    for index, line in enumerate(lines):
+        # No NaN/Infinity: strict JSON parsing rejects them.
+        pose = json.loads(line, parse_constant=lambda c: pytest.fail(f"non-finite {c}"))
+        assert list(pose) == ["frame", "t", "objects"] and pose["frame"] == index
+        assert pose["t"] == pytest.approx(index / 30.0, abs=1e-9)
+        for obj in pose["objects"]:
+            assert list(obj) == ["id", "x_mm", "y_mm", "angle_deg", "length_mm", "width_mm", "corners_mm",
+                                 "vx_mm_s", "vy_mm_s", "measured"]
+            c = np.array(obj["corners_mm"])
+            area = 0.5 * (np.dot(c[:, 0], np.roll(c[:, 1], -1)) - np.dot(c[:, 1], np.roll(c[:, 0], -1)))
+            assert area > 0 and -90 < obj["angle_deg"] <= 90
+            assert math.isclose(area, obj["length_mm"] * obj["width_mm"], rel_tol=1e-3)
+        poses.append(pose)
+    acc = evaluate(poses, truths, skip_first=2)
+    assert acc.visible_frames > 20 and acc.missed_frames == 0
+    assert acc.summary()["centroid_mean_mm"] < 0.2
+    assert "frames in" in proc.stdout  # the summary line
+
+
+def test_frame_size_differs_from_calibration(scene_dir, tmp_path):
+    small = tmp_path / "small"
+    small.mkdir()
+    for i in range(3):
+        cv2.imwrite(str(small / f"{i:05d}.png"), np.zeros((240, 320), np.uint8))
+    proc = _run(["run", "--source", str(small / "%05d.png"), "--calibration", str(scene_dir / "calibration.yaml"),
+                 "--no-plc", "--quiet", "--fps", "30"])
+    assert proc.returncode == 2
+    assert proc.stderr.strip().count("\n") == 0, proc.stderr
+    assert "frame is 320x240" in proc.stderr and "640x480" in proc.stderr and "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--source", "/nonexistent/video.mp4", "--calibration", "CAL"], "video file not found"),
+        (["--source", "/nonexistent/%05d.png", "--calibration", "CAL"], "no image found"),
+        (["--source", "FRAMES", "--calibration", "/nonexistent/c.yaml"], "calibration file not found"),
+        (["--source", "FRAMES"], "--calibration is required"),
+        (["--source", "FRAMES", "--calibration", "CAL", "--fps", "-3"], "--fps: expected a positive number"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(scene_dir, capsys, args, message):
+    subst = {"CAL": str(scene_dir / "calibration.yaml"), "FRAMES": str(scene_dir / "frames" / "%05d.png")}
+    code = main(["run", *(subst.get(a, a) for a in args), "--no-plc", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_corrupt_video_is_bad_input(tmp_path, scene_dir, capsys):
+    bogus = tmp_path / "video.mp4"
+    bogus.write_bytes(b"\x00garbage" * 100)
+    code = main(["run", "--source", str(bogus), "--calibration", str(scene_dir / "calibration.yaml"), "--no-plc"])
+    assert code == 2
+    assert "video.mp4" in capsys.readouterr().err
+
+
+def test_demo_runs_with_no_arguments_but_a_frame_limit(capsys):
+    assert main(["run", "--max-frames", "40", "--quiet", "--no-plc"]) == 0
+    out = capsys.readouterr().out
+    assert "40 frames in" in out
