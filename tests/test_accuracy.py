@@ -53,6 +53,7 @@ def test_subpixel_edges_beat_the_binary_staircase():
     assert binary["length_max_mm"] > 0.5 and binary["width_max_mm"] > 0.5
     assert grey["length_max_mm"] < binary["length_max_mm"] / 5
     assert grey["width_max_mm"] < binary["width_max_mm"] / 5
+    assert grey["centroid_mean_mm"] < binary["centroid_mean_mm"] / 2
 
 
 def _quadrant_scene(angle_deg, vx, vy, omega=0.0, size=(80, 50)):

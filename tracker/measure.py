@@ -50,20 +50,21 @@ class Measurer:
         self._min_area_px = 0.5 * config.min_area_mm2 / mapper.max_mm_per_px() ** 2
         self._mm_per_px = mapper.calibration.mm_per_px_at_centre()
 
-    def __call__(self, frame: np.ndarray, background: np.ndarray, mask: np.ndarray) -> list[Measurement]:
+    def __call__(self, frame: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> list[Measurement]:
+        """Measure every blob of ``mask``; ``reference`` is the empty belt (float32 or uint8)."""
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         found = []
         for contour in contours:
             if cv2.contourArea(contour) < self._min_area_px:
                 continue
-            m = self._measure(frame, background, contour)
+            m = self._measure(frame, reference, contour)
             if m is not None:
                 found.append(m)
         # Deterministic order for the tracker: left to right, top to bottom in the image.
         found.sort(key=lambda m: (m.bbox_px[0], m.bbox_px[1]))
         return found
 
-    def _measure(self, frame, background, contour) -> Measurement | None:
+    def _measure(self, frame, reference, contour) -> Measurement | None:
         cfg = self.config
         x, y, w, h = cv2.boundingRect(contour)
         b = cfg.border_margin_px
@@ -76,7 +77,7 @@ class Measurer:
             return None
         points_px = None
         if cfg.subpixel and not clipped:
-            points_px = self._edge_points(frame, background, contour, (x, y, w, h))
+            points_px = self._edge_points(frame, reference, contour, (x, y, w, h))
         if points_px is None or len(points_px) < 12:
             # Binary staircase: boundary pixel centres sit half a pixel inside the edge.
             points_px = outline
@@ -87,14 +88,14 @@ class Measurer:
         centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
         return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px))
 
-    def _edge_points(self, frame, background, contour, bbox) -> np.ndarray | None:
+    def _edge_points(self, frame, reference, contour, bbox) -> np.ndarray | None:
         cfg = self.config
         x, y, w, h = bbox
         m = cfg.roi_margin_px
         x0, y0 = max(0, x - m), max(0, y - m)
         x1, y1 = min(self._width, x + w + m), min(self._height, y + h + m)
         img = frame[y0:y1, x0:x1].astype(np.float32)
-        ref = background[y0:y1, x0:x1].astype(np.float32)
+        ref = reference[y0:y1, x0:x1].astype(np.float32)
         blob = np.zeros(img.shape, dtype=np.uint8)
         cv2.drawContours(blob, [contour], -1, 255, thickness=cv2.FILLED, offset=(-x0, -y0))
         zone = cv2.dilate(blob, _ZONE)
@@ -104,11 +105,14 @@ class Measurer:
             return None
         # Lighting gain of this frame against the reference, from the belt around the blob.
         gain = float(np.median(img[belt] / np.maximum(ref[belt], 1.0)))
-        diff = img - gain * ref
-        contrast = float(np.median(diff[inner]))
-        if abs(contrast) < cfg.min_contrast:
+        belt_level = gain * ref
+        # Pixel = (1 - c) * belt + c * part: the part's own level is uniform, the belt's is
+        # not (shading), so the contrast is taken per pixel against the local reference.
+        part_level = float(np.median(img[inner]))
+        contrast = part_level - belt_level
+        if np.min(np.abs(contrast)) < cfg.min_contrast:
             return None
-        cover = diff / contrast
+        cover = (img - belt_level) / contrast
         in_zone = zone > 0
         pts = [_crossings(cover, in_zone), _crossings(cover.T, in_zone.T)[:, ::-1]]
         points = np.concatenate(pts)

@@ -44,7 +44,7 @@ class Pipeline:
         t0 = clock()
         mask = self.segmenter(frame)
         t1 = clock()
-        measurements = self.measurer(frame, self.segmenter.background, mask)
+        measurements = self.measurer(frame, self.segmenter.reference, mask)
         t2 = clock()
         objects = self.tracker.step(measurements, t_ns)
         t3 = clock()

@@ -15,7 +15,7 @@ from tracker.config import SegmentConfig
 
 
 class Segmenter:
-    """Frame in, foreground mask out; ``background`` is the reference used for that frame."""
+    """Frame in, foreground mask out; ``background`` is the 8-bit reference used for that frame."""
 
     def __init__(self, config: SegmentConfig) -> None:
         self.config = config
@@ -25,14 +25,16 @@ class Segmenter:
         self._guard = cv2.getStructuringElement(cv2.MORPH_RECT, (7, 7))
         self._count = 0
         self._prev: np.ndarray | None = None
-        self._reference: np.ndarray | None = None  # float32, learnt
+        # The learnt reference (float32): measurement reads it, since rounding it to 8 bits
+        # would bias sub-pixel edges by up to ~0.01 px.
+        self.reference: np.ndarray | None = None
         self._still_frames: np.ndarray | None = None  # uint16, per pixel
         self.background: np.ndarray | None = None  # uint8 view of the reference
 
     def __call__(self, frame: np.ndarray) -> np.ndarray:
         cfg = self.config
-        if self._reference is None:
-            self._reference = frame.astype(np.float32)
+        if self.reference is None:
+            self.reference = frame.astype(np.float32)
             self._still_frames = np.zeros(frame.shape, dtype=np.uint16)
             self.background = frame.copy()
             self._prev = frame
@@ -51,7 +53,7 @@ class Segmenter:
         _, moving = cv2.threshold(cv2.absdiff(frame, self._prev), cfg.motion_threshold, 255, cv2.THRESH_BINARY)
         moving = cv2.dilate(moving, self._guard)
         busy = cv2.dilate(cv2.bitwise_or(fg, moving), self._guard)
-        cv2.accumulateWeighted(frame, self._reference, cfg.background_rate, mask=cv2.bitwise_not(busy))
+        cv2.accumulateWeighted(frame, self.reference, cfg.background_rate, mask=cv2.bitwise_not(busy))
         # A foreground blob with no motion anywhere in it is a parked part or a ghost (what
         # the reference held when a part left): count how long; past the limit it is belt.
         count, labels = cv2.connectedComponents(fg, connectivity=8)
@@ -64,6 +66,6 @@ class Segmenter:
         still[parked] += cfg.background_every
         absorb = still >= cfg.absorb_after_frames
         if absorb.any():
-            self._reference[absorb] = frame[absorb]
+            self.reference[absorb] = frame[absorb]
             still[absorb] = 0
-        self.background = cv2.convertScaleAbs(self._reference)
+        self.background = cv2.convertScaleAbs(self.reference)

@@ -27,6 +27,16 @@ _SIDE_SHADE = (0.8, 0.65)
 _COARSE_STEP = 4
 
 
+def _subpixel_pattern(s: int) -> tuple[np.ndarray, np.ndarray]:
+    """S*S sample offsets in a pixel, multi-jittered: one per cell of an S x S grid and
+    every x (and every y) distinct, so an edge parallel to the pixel grid is resolved
+    to 1/S^2 of a pixel, not 1/S."""
+    i, j = np.meshgrid(np.arange(s), np.arange(s), indexing="ij")
+    u = (i + (j + 0.5) / s) / s - 0.5
+    v = (j + (i + 0.5) / s) / s - 0.5
+    return u.reshape(1, -1), v.reshape(1, -1)
+
+
 @dataclass(frozen=True)
 class CameraSpec:
     """A camera looking down at the belt; world frame as in the contract (Z into the belt)."""
@@ -214,11 +224,9 @@ class Renderer:
                 edge |= padded[dr : dr + labels.shape[0], dc : dc + labels.shape[1]] != labels
         er, ec = np.nonzero(edge)
         if er.size:
-            s = self.scene.supersample
-            offs = (np.arange(s) + 0.5) / s - 0.5
-            ou, ov = np.meshgrid(offs, offs)
-            su = (ec + c0)[:, None] + ou.reshape(1, -1)
-            sv = (er + r0)[:, None] + ov.reshape(1, -1)
+            ou, ov = _subpixel_pattern(self.scene.supersample)
+            su = (ec + c0)[:, None] + ou
+            sv = (er + r0)[:, None] + ov
             sub = self._hits(self._rays_at(su, sv), part, pose)
             for face in (1, 2, 3):
                 cover[face - 1, er, ec] = (sub == face).mean(axis=1)
