@@ -104,18 +104,21 @@ def refine_rect(points: np.ndarray, rect: Rect, band: float, end_fraction: float
 
 
 def _fit_line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Total least squares line: (point on it, unit direction)."""
+    """Total least squares line: (point on it, unit direction), from the 2x2 covariance."""
     mean = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - mean, full_matrices=False)
-    return mean, vt[0]
+    d = points - mean
+    sxx, syy, sxy = float(d[:, 0] @ d[:, 0]), float(d[:, 1] @ d[:, 1]), float(d[:, 0] @ d[:, 1])
+    theta = 0.5 * math.atan2(2 * sxy, sxx - syy)
+    return mean, np.array([math.cos(theta), math.sin(theta)])
 
 
 def _intersect(l1: tuple[np.ndarray, np.ndarray], l2: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     (p1, d1), (p2, d2) = l1, l2
-    m = np.column_stack([d1, -d2])
-    if abs(np.linalg.det(m)) < 1e-9:
+    det = d2[0] * d1[1] - d1[0] * d2[1]
+    if abs(det) < 1e-9:
         return np.array([np.nan, np.nan])
-    s, _ = np.linalg.solve(m, p2 - p1)
+    rx, ry = p2[0] - p1[0], p2[1] - p1[1]
+    s = (d2[0] * ry - d2[1] * rx) / det
     return p1 + s * d1
 
 

@@ -8,6 +8,8 @@ slow random walk (a part's apparent size changes only through noise).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import KalmanFilter
@@ -34,9 +36,14 @@ def make_filter(z: np.ndarray, cfg: TrackConfig) -> KalmanFilter:
 
 def set_interval(kf: KalmanFilter, dt_s: float, cfg: TrackConfig) -> None:
     """Transition and process noise for a step of ``dt_s`` seconds (frames need not be evenly spaced)."""
+    kf.F, kf.Q = _transition(dt_s, cfg)
+
+
+@functools.lru_cache(maxsize=256)
+def _transition(dt_s: float, cfg: TrackConfig) -> tuple[np.ndarray, np.ndarray]:
+    # Cached: a camera's frame interval takes few distinct values. filterpy does not modify F or Q.
     f = np.eye(8)
     f[X, VX] = f[Y, VY] = f[ANGLE, OMEGA] = dt_s
-    kf.F = f
     q = np.zeros((8, 8))
     # Piecewise-constant white acceleration for each (position, rate) pair.
     for pos, rate, sigma in ((X, VX, cfg.accel_sigma_mm_s2), (Y, VY, cfg.accel_sigma_mm_s2),
@@ -44,4 +51,5 @@ def set_interval(kf: KalmanFilter, dt_s: float, cfg: TrackConfig) -> None:
         block = Q_discrete_white_noise(dim=2, dt=dt_s, var=sigma**2)
         q[np.ix_((pos, rate), (pos, rate))] = block
     q[LENGTH, LENGTH] = q[WIDTH, WIDTH] = (cfg.size_rate_sigma_mm_s * dt_s) ** 2
-    kf.Q = q
+    f.flags.writeable = q.flags.writeable = False
+    return f, q

@@ -56,16 +56,23 @@ class Segmenter:
         cv2.accumulateWeighted(frame, self.reference, cfg.background_rate, mask=cv2.bitwise_not(busy))
         # A foreground blob with no motion anywhere in it is a parked part or a ghost (what
         # the reference held when a part left): count how long; past the limit it is belt.
-        count, labels = cv2.connectedComponents(fg, connectivity=8)
-        moving_blobs = np.zeros(count, dtype=bool)
-        moving_blobs[np.unique(labels[moving > 0])] = True
-        moving_blobs[0] = True  # label 0 is the belt itself
-        parked = ~moving_blobs[labels]
-        still = self._still_frames
-        still[~parked] = 0
-        still[parked] += cfg.background_every
-        absorb = still >= cfg.absorb_after_frames
-        if absorb.any():
-            self.reference[absorb] = frame[absorb]
-            still[absorb] = 0
+        parked = self._parked(fg, moving)
+        # (OpenCV ops with a mask and no dst zero what the mask leaves out.)
+        still = cv2.add(self._still_frames, cfg.background_every, mask=parked)
+        absorb = cv2.compare(still, cfg.absorb_after_frames, cv2.CMP_GE)
+        if cv2.countNonZero(absorb):
+            cv2.copyTo(frame.astype(np.float32), absorb, self.reference)
+            still = cv2.bitwise_and(still, still, mask=cv2.bitwise_not(absorb))
+        self._still_frames = still
         self.background = cv2.convertScaleAbs(self.reference)
+
+    @staticmethod
+    def _parked(fg: np.ndarray, moving: np.ndarray) -> np.ndarray:
+        """Mask of the foreground blobs that have no moving pixel."""
+        parked = np.zeros_like(fg)
+        contours, _ = cv2.findContours(fg, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        for contour in contours:
+            x, y, w, h = cv2.boundingRect(contour)
+            if not cv2.countNonZero(moving[y : y + h, x : x + w]):
+                cv2.drawContours(parked, [contour], -1, 255, thickness=cv2.FILLED)
+        return parked
