@@ -16,7 +16,7 @@ from tracker.errors import BadInput
 from tracker.pipeline import Pipeline
 from tracker.runner import Health, PoseSink, Runner, Sink, StatusLine
 from tracker.scenes import SyntheticSource, preset
-from tracker.sources import open_source
+from tracker.sources import Prefetch, open_source
 
 log = logging.getLogger(__name__)
 
@@ -77,6 +77,8 @@ def open_inputs(args: argparse.Namespace):
     if calibration is None and not args.source.lower().endswith(".mcap"):
         raise BadInput(f"--calibration is required for source {args.source}")
     source = open_source(args.source, args.fps)
+    if not source.live:
+        source = Prefetch(source)
     recorded_config = getattr(source, "config", None)
     if calibration is None:
         calibration = source.calibration

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import os
+import queue
 import threading
 import time
 from collections.abc import Iterator
@@ -23,6 +24,10 @@ from tracker.errors import SourceError, SourceLost
 log = logging.getLogger(__name__)
 
 DEFAULT_SEQUENCE_FPS = 30.0
+# Codecs whose frames OpenCV can hand over as 8-bit grey without conversion.
+_RAW_GREY_FOURCC = (b"\0\0\0\0", b"Y800", b"GREY", b"Y8  ")
+# Frames decoded ahead of the loop by a file source's reader thread.
+PREFETCH_FRAMES = 4
 # A live camera that delivers nothing for this long is lost.
 CAMERA_TIMEOUT_S = 2.0
 
@@ -72,6 +77,11 @@ class VideoFileSource(FrameSource):
         self._cap = cv2.VideoCapture(path)
         if not self._cap.isOpened():
             raise SourceError(f"{path}: cannot open as a video (unknown format or codec)")
+        fourcc = int(self._cap.get(cv2.CAP_PROP_FOURCC)).to_bytes(4, "little")
+        if fourcc in _RAW_GREY_FOURCC:
+            # Uncompressed grey: take the 8-bit plane as stored (a tenth of the cost of
+            # expanding it to BGR and converting back).
+            self._cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)
         container_fps = self._cap.get(cv2.CAP_PROP_FPS)
         self._fps = fps
         if fps is None and not (container_fps and container_fps > 0):
@@ -179,6 +189,65 @@ class CameraSource(FrameSource):
         self._running = False
         self._thread.join(timeout=CAMERA_TIMEOUT_S)
         self._cap.release()
+
+
+class Prefetch(FrameSource):
+    """Decodes a file source on a reader thread, a few frames ahead, in order.
+
+    OpenCV releases the GIL while decoding, so decoding overlaps the loop's work on
+    another core. Frames and their order are exactly those of the wrapped source.
+    """
+
+    _END = object()
+
+    def __init__(self, source: FrameSource, depth: int = PREFETCH_FRAMES) -> None:
+        self.source = source
+        self.name = source.name
+        self.live = source.live
+        self._queue: queue.Queue = queue.Queue(maxsize=depth)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._read, name="decode", daemon=True)
+        self._started = False
+
+    def __getattr__(self, name: str):
+        # calibration, config, ... of the wrapped source
+        return getattr(self.source, name)
+
+    def _put(self, item) -> bool:
+        while not self._stop.is_set():
+            try:
+                self._queue.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _read(self) -> None:
+        try:
+            for frame in self.source:
+                if not self._put(frame):
+                    return
+            self._put(self._END)
+        except BaseException as exc:  # handed to the loop's thread, raised there
+            self._put(exc)
+
+    def __iter__(self) -> Iterator[Frame]:
+        if not self._started:
+            self._started = True
+            self._thread.start()
+        while True:
+            item = self._queue.get()
+            if item is self._END:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._started:
+            self._thread.join(timeout=5)
+        self.source.close()
 
 
 def open_source(spec: str, fps: float | None = None) -> FrameSource:
