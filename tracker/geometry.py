@@ -56,7 +56,7 @@ class Rect:
         return self.length_mm * self.width_mm
 
 
-def rect_from_sides(centre: np.ndarray, side_a: np.ndarray, len_a: float, len_b: float) -> Rect:
+def rect_from_sides(centre, side_a, len_a: float, len_b: float) -> Rect:
     """Rectangle from its centre, the direction of one side and both side lengths."""
     angle = math.degrees(math.atan2(side_a[1], side_a[0]))
     if len_b > len_a:
@@ -79,54 +79,60 @@ def refine_rect(points: np.ndarray, rect: Rect, band: float, end_fraction: float
     end) are left out, since anti-aliasing and blur round the corners.
     """
     a = math.radians(rect.angle_deg)
-    u = np.array([math.cos(a), math.sin(a)])
-    v = np.array([-u[1], u[0]])
-    rel = points - np.array([rect.x_mm, rect.y_mm])
-    pu, pv = rel @ u, rel @ v
+    ca, sa = math.cos(a), math.sin(a)
+    # Work in the rectangle's own frame (u along the long side, v across): centred, well conditioned.
+    dx, dy = points[:, 0] - rect.x_mm, points[:, 1] - rect.y_mm
+    pu, pv = dx * ca + dy * sa, -dx * sa + dy * ca
     hl, hw = rect.length_mm / 2, rect.width_mm / 2
+    inner_l, inner_w = hl * (1 - 2 * end_fraction), hw * (1 - 2 * end_fraction)
+    # Sides in order: -v (bottom), +u (right), +v (top), -u (left); label each point with its side.
+    side = np.full(len(points), 4)
+    side[(np.abs(pv + hw) < band) & (np.abs(pu) < inner_l)] = 0
+    side[(np.abs(pu - hl) < band) & (np.abs(pv) < inner_w)] = 1
+    side[(np.abs(pv - hw) < band) & (np.abs(pu) < inner_l)] = 2
+    side[(np.abs(pu + hl) < band) & (np.abs(pv) < inner_w)] = 3
+    sums = [np.bincount(side, weights=w, minlength=5) for w in (None, pu, pv, pu * pu, pv * pv, pu * pv)]
     lines = []
-    # Sides in order: -v (bottom), +u (right), +v (top), -u (left).
-    sides = ((pv, pu, -hw, hl), (pu, pv, hl, hw), (pv, pu, hw, hl), (pu, pv, -hl, hw))
-    for normal_coord, along, half_off, half_along in sides:
-        sel = (np.abs(normal_coord - half_off) < band) & (np.abs(along) < half_along * (1 - 2 * end_fraction))
-        if sel.sum() < 3:
+    for i in range(4):
+        n, su, sv, suu, svv, suv = (float(x[i]) for x in sums)
+        if n < 3:
             return rect
-        lines.append(_fit_line(points[sel]))
-    corners = np.array([_intersect(lines[i - 1], lines[i]) for i in range(4)])
-    if not np.all(np.isfinite(corners)):
+        mu, mv = su / n, sv / n
+        # Total least squares: the direction of the 2x2 scatter matrix's largest eigenvector.
+        theta = 0.5 * math.atan2(2 * (suv - n * mu * mv), (suu - n * mu * mu) - (svv - n * mv * mv))
+        du, dv = math.cos(theta), math.sin(theta)
+        # Back to the plane's frame.
+        x0, y0 = rect.x_mm + mu * ca - mv * sa, rect.y_mm + mu * sa + mv * ca
+        lines.append((x0, y0, du * ca - dv * sa, du * sa + dv * ca))
+    corners = [_intersect(lines[i - 1], lines[i]) for i in range(4)]
+    if any(c is None for c in corners):
         return rect
-    centre = _polygon_centroid(corners)
-    sides = np.roll(corners, -1, axis=0) - corners
-    lengths = np.hypot(sides[:, 0], sides[:, 1])
+    cx, cy = _polygon_centroid(corners)
+    sides = [(corners[(i + 1) % 4][0] - corners[i][0], corners[(i + 1) % 4][1] - corners[i][1]) for i in range(4)]
+    lengths = [math.hypot(*side) for side in sides]
     # Average the two opposite sides' directions (their sign is opposite) for the angle.
-    direction = sides[0] - sides[2]
-    return rect_from_sides(centre, direction, (lengths[0] + lengths[2]) / 2, (lengths[1] + lengths[3]) / 2)
+    direction = (sides[0][0] - sides[2][0], sides[0][1] - sides[2][1])
+    return rect_from_sides((cx, cy), direction, (lengths[0] + lengths[2]) / 2, (lengths[1] + lengths[3]) / 2)
 
 
-def _fit_line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Total least squares line: (point on it, unit direction), from the 2x2 covariance."""
-    mean = points.mean(axis=0)
-    d = points - mean
-    sxx, syy, sxy = float(d[:, 0] @ d[:, 0]), float(d[:, 1] @ d[:, 1]), float(d[:, 0] @ d[:, 1])
-    theta = 0.5 * math.atan2(2 * sxy, sxx - syy)
-    return mean, np.array([math.cos(theta), math.sin(theta)])
-
-
-def _intersect(l1: tuple[np.ndarray, np.ndarray], l2: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    (p1, d1), (p2, d2) = l1, l2
-    det = d2[0] * d1[1] - d1[0] * d2[1]
+def _intersect(l1: tuple[float, ...], l2: tuple[float, ...]) -> tuple[float, float] | None:
+    x1, y1, dx1, dy1 = l1
+    x2, y2, dx2, dy2 = l2
+    det = dx2 * dy1 - dx1 * dy2
     if abs(det) < 1e-9:
-        return np.array([np.nan, np.nan])
-    rx, ry = p2[0] - p1[0], p2[1] - p1[1]
-    s = (d2[0] * ry - d2[1] * rx) / det
-    return p1 + s * d1
+        return None
+    s = (dx2 * (y2 - y1) - dy2 * (x2 - x1)) / det
+    return x1 + s * dx1, y1 + s * dy1
 
 
-def _polygon_centroid(poly: np.ndarray) -> np.ndarray:
-    x, y = poly[:, 0], poly[:, 1]
-    xn, yn = np.roll(x, -1), np.roll(y, -1)
-    cross = x * yn - xn * y
-    area = cross.sum() / 2
+def _polygon_centroid(poly: list[tuple[float, float]]) -> tuple[float, float]:
+    area = cx = cy = 0.0
+    for (x0, y0), (x1, y1) in zip(poly, poly[1:] + poly[:1], strict=True):
+        cross = x0 * y1 - x1 * y0
+        area += cross
+        cx += (x0 + x1) * cross
+        cy += (y0 + y1) * cross
     if abs(area) < 1e-12:
-        return poly.mean(axis=0)
-    return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6 * area)
+        n = len(poly)
+        return sum(p[0] for p in poly) / n, sum(p[1] for p in poly) / n
+    return cx / (3 * area), cy / (3 * area)

@@ -93,24 +93,25 @@ class Measurer:
         m = cfg.roi_margin_px
         x0, y0 = max(0, x - m), max(0, y - m)
         x1, y1 = min(self._width, x + w + m), min(self._height, y + h + m)
-        img = frame[y0:y1, x0:x1].astype(np.float32)
+        img8 = frame[y0:y1, x0:x1]
         ref = reference[y0:y1, x0:x1].astype(np.float32)
-        blob = np.zeros(img.shape, dtype=np.uint8)
+        blob = np.zeros(img8.shape, dtype=np.uint8)
         cv2.drawContours(blob, [contour], -1, 255, thickness=cv2.FILLED, offset=(-x0, -y0))
         zone = cv2.dilate(blob, _ZONE)
-        belt = zone == 0
-        inner = cv2.erode(blob, _ERODE) > 0
-        if belt.sum() < 16 or inner.sum() < 16:
+        belt = cv2.bitwise_not(zone)
+        inner = cv2.erode(blob, _ERODE)
+        if cv2.countNonZero(belt) < 16 or cv2.countNonZero(inner) < 16:
             return None
         # Lighting gain of this frame against the reference, from the belt around the blob.
-        gain = float(np.median(img[belt] / np.maximum(ref[belt], 1.0)))
+        gain = _median_u8(img8, belt) / max(_median_u8(cv2.convertScaleAbs(ref), belt), 1.0)
         belt_level = gain * ref
         # Pixel = (1 - c) * belt + c * part: the part's own level is uniform, the belt's is
         # not (shading), so the contrast is taken per pixel against the local reference.
-        part_level = float(np.median(img[inner]))
+        part_level = _median_u8(img8, inner)
         contrast = part_level - belt_level
         if np.min(np.abs(contrast)) < cfg.min_contrast:
             return None
+        img = img8.astype(np.float32)
         cover = (img - belt_level) / contrast
         in_zone = zone > 0
         pts = [_crossings(cover, in_zone), _crossings(cover.T, in_zone.T)[:, ::-1]]
@@ -118,6 +119,17 @@ class Measurer:
         if points.size == 0:
             return None
         return points + [x0, y0]
+
+
+def _median_u8(image: np.ndarray, mask: np.ndarray) -> float:
+    """Median of 8-bit pixels under ``mask``, interpolated within its grey level (a histogram
+    is ~20x cheaper than sorting, and the interpolation keeps sub-grey-level resolution)."""
+    hist = cv2.calcHist([image], [0], mask, [256], [0, 256]).ravel()
+    cumulative = np.cumsum(hist)
+    half = cumulative[-1] / 2
+    level = int(np.searchsorted(cumulative, half))
+    below = cumulative[level - 1] if level else 0.0
+    return level - 0.5 + (half - below) / hist[level]
 
 
 def _crossings(cover: np.ndarray, zone: np.ndarray) -> np.ndarray:
