@@ -6,6 +6,8 @@ from __future__ import annotations
 import logging
 import signal
 import socket
+import struct
+import threading
 
 import numpy as np
 import pytest
@@ -27,7 +29,7 @@ from plc.options import PlcOptions
 from plc.sim import PlcSimulator
 from plc.writer import PlcWriter
 from tracker.cli import main
-from tracker.poses import FrameResult
+from tracker.poses import FrameResult, TrackedObject
 from tracker.runner import Health
 from tracker.sources import Frame
 
@@ -209,3 +211,60 @@ def test_submit_returns_while_the_plc_hangs():
         finally:
             writer.close()
     assert writer.stats.losses >= 1
+
+
+class CrashOnFirstPose:
+    """A minimal real Modbus TCP server (function 16 only) that drops the connection without an
+    answer on the first block carrying a pose, as a PLC that dies in the middle of a request."""
+
+    def __init__(self) -> None:
+        self.sock = socket.create_server(("127.0.0.1", 0))
+        self.port = self.sock.getsockname()[1]
+        self.crashed = False
+        self.accepted: list[list[int]] = []
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                conn, _ = self.sock.accept()
+            except OSError:
+                return
+            threading.Thread(target=self._handle, args=(conn,), daemon=True).start()
+
+    def _handle(self, conn: socket.socket) -> None:
+        with conn:
+            while True:
+                head = conn.recv(7, socket.MSG_WAITALL)
+                if len(head) < 7:
+                    return
+                tid, _, length, unit = struct.unpack(">HHHB", head)
+                pdu = conn.recv(length - 1, socket.MSG_WAITALL)
+                _, address, qty, _ = struct.unpack(">BHHB", pdu[:6])
+                regs = list(struct.unpack(f">{qty}H", pdu[6:6 + 2 * qty]))
+                if regs[3] > 0 and not self.crashed:
+                    self.crashed = True
+                    return  # close without answering
+                self.accepted.append(regs)
+                conn.sendall(struct.pack(">HHHBBHH", tid, 0, 6, unit, 16, address, qty))
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def test_pose_in_flight_when_the_plc_dies_is_written_after_reconnect():
+    server = CrashOnFirstPose()
+    writer = writer_for(server.port, backoff_first_s=0.05)
+    try:
+        wait_until(lambda: len(server.accepted) >= 1, "a heartbeat write")
+        corners = np.array([[0, 0], [80, 0], [80, 50], [0, 50]], dtype=float)
+        obj = TrackedObject(7, 40.0, 25.0, 0.0, 80.0, 50.0, corners, 300.0, 0.0, True)
+        writer.submit(Frame(0, 0, np.zeros((2, 2), np.uint8), 123_000_000), FrameResult(0, 0, (obj,)))
+        wait_until(lambda: any(r[3] for r in server.accepted), "the pose to be written after the reconnect")
+    finally:
+        writer.close()
+        server.close()
+    assert server.crashed and writer.stats.losses == 1 and writer.stats.connects == 2
+    block = decode_block(next(r for r in server.accepted if r[3]), WordOrder.ABCD)
+    assert (block["seq"], block["id"], block["t_capture_ms"], block["x_mm"]) == (1, 7, 123, 40.0)
