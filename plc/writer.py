@@ -14,7 +14,7 @@ import time
 from dataclasses import dataclass
 
 from plc.block import BlockBuilder, Pose, Prepared, ms_u32
-from plc.link import Link, LinkDown, PlcRejected
+from plc.link import EXCEPTION_NAMES, Link, LinkDown, PlcRejected
 from plc.options import PlcOptions, backoff_delays
 from tracker.poses import FrameResult
 from tracker.runner import Health
@@ -80,7 +80,7 @@ class PlcWriter:
         if self.state == CONNECTED:
             return f"PLC ok {s.last_latency_ms:.1f} ms seq {self._builder.state.seq}"
         if self.state == REJECTED:
-            return f"PLC rejected: exception {self._reject_code}"
+            return f"PLC rejected: exception {self._reject_code} ({EXCEPTION_NAMES.get(self._reject_code, '?')})"
         return f"PLC {self.state}"
 
     def close(self) -> None:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import re
+import signal
+import socket
 import subprocess
 
 import numpy as np
@@ -139,6 +141,7 @@ def test_heartbeat_without_any_pose():
             wait_until(lambda: sim.write_count >= 4, "four heartbeat writes")
             blocks = [decode_block(w.values, WordOrder.ABCD) for w in list(sim.history)[:4]]
             assert writer.status().startswith("PLC ok") and "seq 0" in writer.status()
+            assert writer.link._client.socket.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY)
         finally:
             writer.close()
     assert [b["heartbeat"] for b in blocks] == [1, 2, 3, 4]
@@ -176,3 +179,23 @@ def test_server_mode_serves_the_map_for_the_arm(rendered):
     block = decode_block(seen["words"], WordOrder.CDAB)
     assert block["status"] & 1 and block["count"] == 1 and block["seq"] >= 1
     assert not port_open(port), "the server stops with the run"
+
+
+def test_sigterm_writes_a_final_status_with_running_cleared():
+    with PlcSimulator(port=0) as sim:
+        # The demo source is long enough (240 frames) to be stopped in the middle.
+        proc = subprocess.Popen([TRACKER, "run", "--quiet", "--plc", f"127.0.0.1:{sim.port}"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            wait_until(lambda: decode_block(sim.read(), WordOrder.ABCD)["seq"] >= 1 or proc.poll() is not None,
+                       "the first pose from the tracker", 30)
+            assert decode_block(sim.read(), WordOrder.ABCD)["status"] & 1, "running while it runs"
+            proc.send_signal(signal.SIGTERM)
+            out, err = proc.communicate(timeout=DEADLINE_S)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        block = decode_block(sim.read(), WordOrder.ABCD)
+    assert proc.returncode == 0, err
+    assert "stopped by signal" in out
+    assert block["status"] & 1 == 0 and block["heartbeat"] >= 2

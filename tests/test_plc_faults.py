@@ -161,7 +161,7 @@ def test_plc_exception_responses_are_reported_once(rendered, caplog):
     assert len(errors) == 1
     assert "exception 2 (illegal data address)" in errors[0].getMessage()
     assert "registers 300-342 (40301-40343)" in errors[0].getMessage()
-    assert status["text"] == "PLC rejected: exception 2"
+    assert status["text"] == "PLC rejected: exception 2 (illegal data address)"
 
 
 def test_cli_exception_response_keeps_running(tmp_path, capsys):
