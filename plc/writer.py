@@ -1,9 +1,12 @@
 """The PLC writer: a thread beside the real-time loop.
 
-``submit()`` (called by the loop) drops the newest pose into a slot of one and returns; the
-thread writes it, or, when no new pose comes, rewrites the block with the heartbeat advanced,
-so the heartbeat moves at least every ``heartbeat_s``. A lost PLC is reconnected with an
-exponential back-off; each state change is logged once, never per frame.
+``submit()`` (called by the loop) drops the newest pose into a slot and returns; the thread
+writes it (latest pose wins: a pose not yet written is replaced by a newer one), or, when no
+new pose comes, rewrites the block with the heartbeat advanced, so the heartbeat moves at least
+every ``heartbeat_s``. The slot holds the newest pose with objects and, beside it, a newer frame
+without any: so the last pose of a part that has just left the view is written before the empty
+frame after it, never replaced by it. A lost PLC is reconnected with an exponential back-off;
+each state change is logged once, never per frame.
 """
 
 from __future__ import annotations
@@ -54,7 +57,8 @@ class PlcWriter:
         self._owned = owned  # things to stop after the final write (an embedded simulator)
         self._clock_ns = clock_ns
         self._builder = BlockBuilder(options.word_order)
-        self._slot: Pose | None = None
+        self._pending_pose: Pose | None = None  # newest unwritten pose with objects
+        self._pending_empty: Pose | None = None  # newest unwritten frame without objects, newer than the above
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._stop = threading.Event()
@@ -69,9 +73,13 @@ class PlcWriter:
         arrival_ns = frame.arrival_ns if frame.arrival_ns > 0 else self._clock_ns()
         pose = Pose(ms_u32(arrival_ns), result.objects)
         with self._lock:
-            if self._slot is not None:
-                self.stats.replaced += 1
-            self._slot = pose
+            replaced = self._pending_empty is not None
+            if pose.objects:
+                replaced += self._pending_pose is not None
+                self._pending_pose, self._pending_empty = pose, None
+            else:
+                self._pending_empty = pose
+            self.stats.replaced += replaced
             self.stats.submitted += 1
         self._wake.set()
 
@@ -97,15 +105,23 @@ class PlcWriter:
 
     # ---- the writer thread ----
     def _take(self) -> Pose | None:
+        """The oldest of the (at most two) pending frames: a pose before the empty frame after it."""
         with self._lock:
-            pose, self._slot = self._slot, None
+            if self._pending_pose is not None:
+                pose, self._pending_pose = self._pending_pose, None
+            else:
+                pose, self._pending_empty = self._pending_empty, None
+            if self._pending_empty is not None:
+                self._wake.set()  # the empty frame after this pose is written next, not at the next heartbeat
         return pose
 
     def _put_back(self, pose: Pose) -> None:
         """A pose that did not reach the PLC stays the one to write, unless a newer one came meanwhile."""
         with self._lock:
-            if self._slot is None:
-                self._slot = pose
+            if pose.objects and self._pending_pose is None:
+                self._pending_pose = pose
+            elif not pose.objects and self._pending_pose is None and self._pending_empty is None:
+                self._pending_empty = pose
 
     def _run(self) -> None:
         delays = backoff_delays(self.options.backoff_first_s, self.options.backoff_max_s)
@@ -133,7 +149,11 @@ class PlcWriter:
         if not self.link.connected and not self._connect():
             log.warning("PLC %s: not reachable at exit; the PLC will see the heartbeat stop", self.link.name)
             return
-        if self._write(self._take(), running=False):
+        pose, after = self._take(), self._take()
+        if after is not None:  # a last pose and the empty frame after it: both, in order
+            self._write(pose, running=True)
+            pose = after
+        if self._write(pose, running=False):
             log.debug("PLC %s: final status written (running bit cleared)", self.link.name)
         self.state = CLOSED
 

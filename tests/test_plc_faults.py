@@ -268,3 +268,23 @@ def test_pose_in_flight_when_the_plc_dies_is_written_after_reconnect():
     assert server.crashed and writer.stats.losses == 1 and writer.stats.connects == 2
     block = decode_block(next(r for r in server.accepted if r[3]), WordOrder.ABCD)
     assert (block["seq"], block["id"], block["t_capture_ms"], block["x_mm"]) == (1, 7, 123, 40.0)
+
+
+def test_last_pose_of_a_part_is_not_replaced_by_the_empty_frame_after_it():
+    port = free_port()
+    writer = writer_for(port)  # nobody listens yet: both frames wait in the slot
+    corners = np.array([[0, 0], [80, 0], [80, 50], [0, 50]], dtype=float)
+    part = TrackedObject(4, 40.0, 25.0, 0.0, 80.0, 50.0, corners, 300.0, 0.0, True)
+    image = np.zeros((2, 2), np.uint8)
+    writer.submit(Frame(0, 0, image, 10_000_000), FrameResult(0, 0, (part,)))
+    writer.submit(Frame(1, 1, image, 20_000_000), FrameResult(1, 1, ()))
+    with PlcSimulator(port=port) as sim:
+        try:
+            wait_until(lambda: sim.write_count >= 2, "two writes")
+        finally:
+            writer.close()
+        blocks = [decode_block(w.values, WordOrder.ABCD) for w in sim.history]
+    first, second = blocks[0], blocks[1]
+    assert (first["seq"], first["count"], first["id"], first["t_capture_ms"]) == (1, 1, 4, 10)
+    assert (second["seq"], second["count"], second["id"], second["t_capture_ms"]) == (1, 0, 4, 10)
+    assert blocks[-1]["count"] == 0
