@@ -87,9 +87,9 @@ def open_inputs(args: argparse.Namespace):
 
 def _plc_sink(args: argparse.Namespace, health: Health, demo: bool) -> Sink | None:
     """The PLC writer (contract section 4), or None with --no-plc."""
-    if args.plc:
-        raise BadInput("--plc: PLC output is not available in this build")
-    return None
+    from plc.sink import open_plc_sink  # noqa: PLC0415 - pymodbus is loaded only when a PLC is used
+
+    return open_plc_sink(args, health, demo)
 
 
 def _record_sink(args: argparse.Namespace, health: Health, source, calibration, config) -> Sink | None:
