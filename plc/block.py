@@ -42,6 +42,8 @@ class Pose:
 
     t_capture_ms: int
     objects: tuple[TrackedObject, ...]
+    # Full-resolution monotonic arrival time, for the capture-to-register latency figures.
+    arrival_ns: int = 0
 
     def __post_init__(self) -> None:
         if not 0 <= self.t_capture_ms <= U32_MASK:

@@ -14,7 +14,8 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 
 from plc.block import BlockBuilder, Pose, Prepared, ms_u32
 from plc.link import EXCEPTION_NAMES, Link, LinkDown, PlcRejected
@@ -24,6 +25,8 @@ from tracker.runner import Health
 from tracker.sources import Frame
 
 log = logging.getLogger(__name__)
+
+LATENCY_WINDOW = 4096
 
 # States shown on the status line.
 CONNECTING, CONNECTED, LOST, REJECTED, CLOSED = "connecting", "ok", "lost", "rejected", "closed"
@@ -42,6 +45,8 @@ class WriterStats:
     losses: int = 0
     last_latency_ms: float = 0.0
     max_latency_ms: float = 0.0
+    # Frame arrival -> its pose accepted by the PLC (ns), for the newest poses (a ring: flat memory).
+    capture_to_register_ns: deque = field(default_factory=lambda: deque(maxlen=LATENCY_WINDOW))
 
 
 class PlcWriter:
@@ -71,7 +76,7 @@ class PlcWriter:
     # ---- called by the real-time loop: never blocks on the network ----
     def submit(self, frame: Frame, result: FrameResult) -> None:
         arrival_ns = frame.arrival_ns if frame.arrival_ns > 0 else self._clock_ns()
-        pose = Pose(ms_u32(arrival_ns), result.objects)
+        pose = Pose(ms_u32(arrival_ns), result.objects, arrival_ns)
         with self._lock:
             replaced = self._pending_empty is not None
             if pose.objects:
@@ -208,6 +213,8 @@ class PlcWriter:
         s.poses_written += prepared.new_pose
         s.last_latency_ms = latency_ms
         s.max_latency_ms = max(s.max_latency_ms, latency_ms)
+        if prepared.new_pose and pose is not None and pose.arrival_ns:
+            s.capture_to_register_ns.append(self._clock_ns() - pose.arrival_ns)
         if self.state == REJECTED:
             log.info("PLC %s: writes accepted again", self.link.name)
             self._reject_code = None

@@ -8,6 +8,7 @@ pipeline sees) and the tracker's monotonic time when the frame arrived
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import queue
@@ -241,7 +242,9 @@ class Prefetch(FrameSource):
                 return
             if isinstance(item, BaseException):
                 raise item
-            yield item
+            # A file has no capture clock: its frame "arrives" when the loop takes it, not
+            # when it was decoded ahead (else latency figures would count the read-ahead).
+            yield dataclasses.replace(item, arrival_ns=time.monotonic_ns())
 
     def close(self) -> None:
         self._stop.set()
