@@ -1,0 +1,147 @@
+"""Live cameras, with a fake capture device (a physical camera cannot exist here).
+
+The loop must always get the newest frame (never a stale buffered one), count
+the frames it could not take as overruns, and report a dead camera clearly.
+"""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from tracker import sources
+from tracker.cli import main
+from tracker.errors import SourceError, SourceLost
+from tracker.sources import CameraSource
+
+
+class FakeCapture:
+    """Delivers numbered frames (the number is in pixel [0, 0]) as fast as asked, or dies."""
+
+    def __init__(self, index, frames=10_000, opened=True, period_s=0.0005):
+        self.frames, self.opened, self.period_s = frames, opened, period_s
+        self.delivered = 0
+        self.lock = threading.Lock()
+
+    def isOpened(self):  # noqa: N802 - OpenCV's name
+        return self.opened
+
+    def set(self, *_):
+        return True
+
+    def read(self):
+        time.sleep(self.period_s)  # the camera's frame interval, not a wait for a server
+        with self.lock:
+            if self.delivered >= self.frames:
+                return False, None
+            image = np.zeros((48, 64), np.uint8)
+            image[0, 0] = self.delivered % 256
+            image[0, 1] = self.delivered // 256
+            self.delivered += 1
+        return True, image
+
+    def release(self):
+        pass
+
+
+def _fake(monkeypatch, **kw):
+    made = {}
+
+    def factory(index):
+        made["cap"] = FakeCapture(index, **kw)
+        return made["cap"]
+
+    monkeypatch.setattr(sources.cv2, "VideoCapture", factory)
+    return made
+
+
+def test_slow_loop_gets_the_newest_frames_and_counts_overruns(monkeypatch):
+    made = _fake(monkeypatch, frames=400)
+    cam = CameraSource(0)
+    taken = []
+    with pytest.raises(SourceLost):
+        for frame in cam:
+            taken.append(int(frame.image[0, 0]) + 256 * int(frame.image[0, 1]))
+            time.sleep(0.005)  # a loop 10x slower than the camera
+    cam.close()
+    delivered = made["cap"].delivered
+    assert delivered == 400
+    assert taken == sorted(set(taken)), "frames come in order, none twice"
+    assert len(taken) < delivered / 3, "the loop was slower: it must not see every buffered frame"
+    # Every frame the camera delivered was either taken by the loop or replaced unseen (an overrun).
+    assert cam.overruns == delivered - len(taken)
+    assert max(np.diff(taken)) > 2
+
+
+def test_camera_that_stops_delivering_is_lost(monkeypatch):
+    _fake(monkeypatch, frames=5)
+    cam = CameraSource(0)
+    with pytest.raises(SourceLost, match="camera 0: stopped delivering frames"):
+        for _ in cam:
+            pass
+    cam.close()
+
+
+def test_camera_that_cannot_open_is_bad_input(monkeypatch, capsys, tmp_path):
+    _fake(monkeypatch, opened=False)
+    with pytest.raises(SourceError, match="camera 3: cannot open"):
+        CameraSource(3)
+    from tracker import calibration as calib_io
+    from tracker.synthetic import CameraSpec
+
+    calib = tmp_path / "c.yaml"
+    calib_io.save(CameraSpec().calibration(), calib)
+    assert main(["run", "--source", "3", "--calibration", str(calib), "--no-plc", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "camera 3: cannot open" in err and len(err.strip().splitlines()) == 1
+
+
+def test_dead_camera_mid_run_ends_the_run_with_one_line(monkeypatch, capsys, tmp_path):
+    from tracker import calibration as calib_io
+    from tracker.synthetic import CameraSpec
+
+    _fake(monkeypatch, frames=30)
+    calib = tmp_path / "c.yaml"
+    calib_io.save(CameraSpec(width=64, height=48, focal_px=56.0).calibration(), calib)
+    code = main(["run", "--source", "0", "--calibration", str(calib), "--no-plc", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "camera 0: stopped delivering frames" in err and "Traceback" not in err
+
+
+def test_overruns_reach_the_health_word_and_status_line(monkeypatch):
+    from tracker.pipeline import Pipeline
+    from tracker.runner import FAULT_OVERRUN, Health, Runner
+    from tracker.synthetic import CameraSpec
+
+    _fake(monkeypatch, frames=2000)
+
+    class SlowSink:
+        def submit(self, frame, result):
+            time.sleep(0.004)  # stands in for a loop slower than the camera
+
+        def status(self):
+            return ""
+
+        def close(self):
+            pass
+
+    class Lines:
+        def __init__(self):
+            self.lines = []
+
+        def show(self, text, force=False):
+            self.lines.append(text)
+
+        def end(self):
+            pass
+
+    health, status = Health(), Lines()
+    calib = CameraSpec(width=64, height=48, focal_px=56.0).calibration()
+    runner = Runner(CameraSource(0), Pipeline(calib), [SlowSink()], health, status, max_frames=20)
+    summary = runner.run()
+    assert summary.frames == 20
+    assert summary.overruns > 20 and health.overruns == summary.overruns
+    assert health.fault == FAULT_OVERRUN
+    assert any("overruns" in line for line in status.lines)
