@@ -189,7 +189,7 @@ class Runner:
         finally:
             health.running = False
             summary.seconds = time.monotonic() - started
-            summary.overruns = self.source.overruns
+            summary.overruns = health.overruns = self.source.overruns
             n = min(summary.frames, _LOOP_WINDOW)
             if n:
                 summary.loop_ms_p50 = float(np.percentile(loop_ns[:n], 50) / 1e6)
