@@ -53,6 +53,10 @@ def test_run_writes_the_contract_pose_stream(scene_dir, tmp_path):
     assert acc.visible_frames > 20 and acc.missed_frames == 0
     assert acc.summary()["centroid_mean_mm"] < 0.2
     assert "frames in" in proc.stdout  # the summary line
+    # The same figures from the command line.
+    report = _run(["evaluate", str(poses_path), str(scene_dir / "truth.jsonl"), "--json"])
+    assert report.returncode == 0
+    assert json.loads(report.stdout) == pytest.approx(acc.summary())
 
 
 def test_frame_size_differs_from_calibration(scene_dir, tmp_path):
