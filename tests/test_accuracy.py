@@ -144,3 +144,10 @@ def test_renders_are_cached_for_the_session():
     # Guard for the suite's speed: the same scene is not rendered twice.
     scene = nadir(300.0)
     assert rendered(scene) is rendered(scene)
+
+
+def test_rounding_keeps_the_angle_in_range():
+    from tracker.poses import TrackedObject
+
+    obj = TrackedObject(1, 0.0, 0.0, -89.99996, 80.0, 50.0, np.zeros((4, 2)), 0.0, 0.0, True)
+    assert obj.to_dict()["angle_deg"] == 90.0

@@ -19,7 +19,7 @@ class SegmentConfig:
     motion_threshold: int = 12
     # Learning rate of the empty-belt reference where nothing moves.
     background_rate: float = 0.1
-    # The reference is refreshed every N frames (amortises the cost of learning).
+    # Each pixel of the reference learns every N frames (one 1/N stripe of rows per frame).
     background_every: int = 4
     # A foreground blob with no motion in it for this many frames joins the background
     # (a parked part, or a ghost left where a part sat when the reference was taken).
@@ -30,6 +30,9 @@ class SegmentConfig:
     def __post_init__(self) -> None:
         _positive(self, "diff_threshold", "motion_threshold", "background_every",
                   "absorb_after_frames", "open_kernel_px")
+        if self.absorb_after_frames > 255 * self.background_every:
+            raise BadInput(f"absorb_after_frames: expected <= 255 * background_every "
+                           f"({255 * self.background_every}), got {self.absorb_after_frames}")
         if not 0 < self.background_rate <= 1:
             raise BadInput(f"background_rate: expected 0 < rate <= 1, got {self.background_rate}")
 

@@ -37,12 +37,18 @@ class TrackedObject:
         return {
             "id": self.id,
             "x_mm": round(self.x_mm, r), "y_mm": round(self.y_mm, r),
-            "angle_deg": round(self.angle_deg, r),
+            "angle_deg": _round_angle(self.angle_deg),
             "length_mm": round(self.length_mm, r), "width_mm": round(self.width_mm, r),
             "corners_mm": [[round(float(x), r), round(float(y), r)] for x, y in self.corners_mm],
             "vx_mm_s": round(self.vx_mm_s, r), "vy_mm_s": round(self.vy_mm_s, r),
             "measured": self.measured,
         }
+
+
+def _round_angle(angle_deg: float) -> float:
+    """Rounded, still in (-90, 90]: -89.99996 must not become -90."""
+    a = round(angle_deg, _MM_DECIMALS)
+    return 90.0 if a <= -90.0 else a
 
 
 @dataclass(frozen=True)

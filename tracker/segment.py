@@ -13,58 +13,82 @@ import numpy as np
 
 from tracker.config import SegmentConfig
 
+# Side of the guard band around moving/foreground pixels: blur fringes fainter than the
+# threshold must not leak into the reference. Two dilations reach 2 * (7 // 2) rows.
+_GUARD_PX = 7
+_GUARD_REACH = 2 * (_GUARD_PX // 2)
+
 
 class Segmenter:
-    """Frame in, foreground mask out; ``background`` is the 8-bit reference used for that frame."""
+    """Frame in, foreground mask out; ``background`` is the 8-bit reference used for that frame.
+
+    The reference learns one horizontal stripe per frame (``background_every``
+    stripes cover the frame), so learning costs the same on every frame instead
+    of a spike every few frames.
+    """
 
     def __init__(self, config: SegmentConfig) -> None:
         self.config = config
         self._kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (config.open_kernel_px,) * 2)
-        # Guard band around moving/foreground pixels: blur fringes fainter than the
-        # threshold must not leak into the reference.
-        self._guard = cv2.getStructuringElement(cv2.MORPH_RECT, (7, 7))
+        self._guard = cv2.getStructuringElement(cv2.MORPH_RECT, (_GUARD_PX, _GUARD_PX))
         self._count = 0
         self._prev: np.ndarray | None = None
         # The learnt reference (float32): measurement reads it, since rounding it to 8 bits
         # would bias sub-pixel edges by up to ~0.01 px.
         self.reference: np.ndarray | None = None
-        self._still_frames: np.ndarray | None = None  # uint16, per pixel
-        self.background: np.ndarray | None = None  # uint8 view of the reference
+        # Per pixel: learning steps its blob has been foreground without moving (uint8).
+        self._still_steps: np.ndarray | None = None
+        self.background: np.ndarray | None = None  # uint8 copy of the reference
 
     def __call__(self, frame: np.ndarray) -> np.ndarray:
         cfg = self.config
         if self.reference is None:
             self.reference = frame.astype(np.float32)
-            self._still_frames = np.zeros(frame.shape, dtype=np.uint16)
+            self._still_steps = np.zeros(frame.shape, dtype=np.uint8)
             self.background = frame.copy()
             self._prev = frame
             self._count = 1
             return np.zeros(frame.shape, dtype=np.uint8)
         _, fg = cv2.threshold(cv2.absdiff(frame, self.background), cfg.diff_threshold, 255, cv2.THRESH_BINARY)
         mask = cv2.morphologyEx(fg, cv2.MORPH_OPEN, self._kernel)
+        self._learn_stripe(frame, fg, self._count % cfg.background_every)
         if self._count % cfg.background_every == 0:
-            self._learn(frame, fg)
+            self._absorb_parked(frame, fg)
         self._prev = frame
         self._count += 1
         return mask
 
-    def _learn(self, frame: np.ndarray, fg: np.ndarray) -> None:
+    def _moving(self, frame: np.ndarray, prev: np.ndarray) -> np.ndarray:
+        _, moving = cv2.threshold(cv2.absdiff(frame, prev), self.config.motion_threshold, 255, cv2.THRESH_BINARY)
+        return moving
+
+    def _learn_stripe(self, frame: np.ndarray, fg: np.ndarray, stripe: int) -> None:
+        """Blend this frame into the reference in stripe ``stripe`` of the frame, where nothing moves."""
+        rows = frame.shape[0]
+        n = self.config.background_every
+        r0, r1 = rows * stripe // n, rows * (stripe + 1) // n
+        # Compute the guard band on the stripe plus the rows the dilations reach into.
+        g0, g1 = max(0, r0 - _GUARD_REACH), min(rows, r1 + _GUARD_REACH)
+        moving = self._moving(frame[g0:g1], self._prev[g0:g1])
+        busy = cv2.dilate(cv2.bitwise_or(fg[g0:g1], cv2.dilate(moving, self._guard)), self._guard)
+        still = cv2.bitwise_not(busy[r0 - g0 : r1 - g0])
+        cv2.accumulateWeighted(frame[r0:r1], self.reference[r0:r1], self.config.background_rate, mask=still)
+        self.background[r0:r1] = cv2.convertScaleAbs(self.reference[r0:r1])
+
+    def _absorb_parked(self, frame: np.ndarray, fg: np.ndarray) -> None:
+        """A foreground blob with no motion anywhere in it is a parked part or a ghost (what
+        the reference held when a part left): count how long; past the limit it is belt."""
         cfg = self.config
-        _, moving = cv2.threshold(cv2.absdiff(frame, self._prev), cfg.motion_threshold, 255, cv2.THRESH_BINARY)
-        moving = cv2.dilate(moving, self._guard)
-        busy = cv2.dilate(cv2.bitwise_or(fg, moving), self._guard)
-        cv2.accumulateWeighted(frame, self.reference, cfg.background_rate, mask=cv2.bitwise_not(busy))
-        # A foreground blob with no motion anywhere in it is a parked part or a ghost (what
-        # the reference held when a part left): count how long; past the limit it is belt.
-        parked = self._parked(fg, moving)
+        parked = self._parked(fg, cv2.dilate(self._moving(frame, self._prev), self._guard))
         # (OpenCV ops with a mask and no dst zero what the mask leaves out.)
-        still = cv2.add(self._still_frames, cfg.background_every, mask=parked)
-        absorb = cv2.compare(still, cfg.absorb_after_frames, cv2.CMP_GE)
+        still = cv2.add(self._still_steps, 1, mask=parked)
+        limit = -(-cfg.absorb_after_frames // cfg.background_every)  # learning steps, rounded up
+        absorb = cv2.compare(still, limit, cv2.CMP_GE)
         if cv2.countNonZero(absorb):
             cv2.copyTo(frame.astype(np.float32), absorb, self.reference)
+            self.background = cv2.convertScaleAbs(self.reference)
             still = cv2.bitwise_and(still, still, mask=cv2.bitwise_not(absorb))
-        self._still_frames = still
-        self.background = cv2.convertScaleAbs(self.reference)
+        self._still_steps = still
 
     @staticmethod
     def _parked(fg: np.ndarray, moving: np.ndarray) -> np.ndarray:
