@@ -18,6 +18,7 @@ from tracker.errors import TrackerError
 COMMAND_MODULES = (
     "tracker.cli_run",
     "tracker.cli_synth",
+    "tracker.recording.cli",
 )
 
 
