@@ -191,12 +191,11 @@ def time_full_loop(video: Path, calib, record_to: Path | None) -> dict:
 
 
 def make_recorder(path: Path, calib, health):
-    """The MCAP recorder sink, when this build has one (None otherwise)."""
-    try:
-        from tracker.recording.writer import open_recorder  # noqa: PLC0415
-    except ImportError:
-        return None
-    return open_recorder(path, calib, health)
+    """The MCAP recorder sink, as `tracker run --record` opens it."""
+    from tracker.config import TrackerConfig  # noqa: PLC0415
+    from tracker.recording.writer import Recorder, RunInfo  # noqa: PLC0415
+
+    return Recorder.open(str(path), RunInfo(calib, TrackerConfig(), "bench", None), health)
 
 
 def bench_size(width: int, height: int, repeats: int, workdir: Path) -> dict:

@@ -30,6 +30,17 @@ def run_pipeline(scene: SceneSpec, config=None) -> tuple[list[dict], list[dict]]
 
 
 @pytest.fixture(scope="session")
+def scene_dir(tmp_path_factory) -> Path:
+    """A short synthetic scene on disk (frames/%05d.png, calibration.yaml, truth.jsonl), 30 fps."""
+    from tracker.cli_synth import write_scene
+    from tracker.scenes import nadir
+
+    out = tmp_path_factory.mktemp("scene")
+    write_scene(nadir(600.0, fps=30.0), out)
+    return out
+
+
+@pytest.fixture(scope="session")
 def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"../shared/data is absent ({SHARED_DATA}): real-data tests need it")

@@ -10,17 +10,7 @@ import numpy as np
 import pytest
 
 from tracker.cli import main
-from tracker.cli_synth import write_scene
 from tracker.evaluate import evaluate
-from tracker.scenes import nadir
-
-
-@pytest.fixture(scope="module")
-def scene_dir(tmp_path_factory):
-    out = tmp_path_factory.mktemp("scene")
-    scene = nadir(600.0, fps=30.0)
-    write_scene(scene, out)
-    return out
 
 
 def _run(args):

@@ -19,6 +19,7 @@ COMMAND_MODULES = (
     "tracker.cli_run",
     "tracker.cli_synth",
     "tracker.cli_evaluate",
+    "tracker.recording.cli",
     "plc.cli",
 )
 

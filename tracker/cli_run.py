@@ -94,9 +94,14 @@ def _plc_sink(args: argparse.Namespace, health: Health, demo: bool) -> Sink | No
 
 def _record_sink(args: argparse.Namespace, health: Health, source, calibration, config) -> Sink | None:
     """The MCAP recorder, or None without --record."""
-    if args.record:
-        raise BadInput("--record: recording is not available in this build")
-    return None
+    if not args.record:
+        return None
+    from tracker.recording.writer import Recorder, RunInfo  # noqa: PLC0415 - optional edge
+
+    scene = getattr(source, "scene", None)  # a synthetic scene knows its frame rate
+    fps = args.fps or getattr(source, "fps", None) or getattr(scene, "fps", None)
+    info = RunInfo(calibration, config, source.name, fps)
+    return Recorder.open(args.record, info, health, overruns=lambda: source.overruns)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -22,7 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "and DIR/scene.json.",
     )
     p.add_argument("preset", choices=sorted(PRESETS), help="scene to render")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", help="output folder")
+    p.add_argument("--record", metavar="OUT.mcap",
+                   help="instead of files, track the scene and record it (how recordings/demo.mcap is made)")
     p.add_argument("--frames", type=int, help="number of frames (default: the preset's)")
     p.add_argument("--size", help="WIDTHxHEIGHT (same field of view)")
     p.add_argument("--noise", type=float, help="sensor noise sigma, grey levels")
@@ -72,6 +74,14 @@ def write_scene(scene: SceneSpec, out: Path) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     scene = scene_from_args(args)
+    if args.record:
+        from tracker.recording.demo import record_scene  # noqa: PLC0415 - optional edge
+
+        summary = record_scene(scene, args.record, name=f"synthetic {args.preset}")
+        print(f"tracker: {summary.line()} -> {args.record}")
+        return 0
+    if not args.out:
+        raise BadInput("synth: give --out DIR (frames on disk) or --record OUT.mcap")
     pattern = write_scene(scene, Path(args.out))
     print(f"tracker: {scene.n_frames} frames at {scene.fps:g} fps -> {pattern}")
     print(f"tracker: run it with: tracker run --source {pattern} --calibration {Path(args.out) / 'calibration.yaml'} "

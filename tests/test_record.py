@@ -1,0 +1,244 @@
+"""Recording every frame to MCAP, replaying it bit-exactly, and surviving kills and full disks."""
+
+import errno
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from tracker import calibration as calib_io
+from tracker.cli import main
+from tracker.config import TrackerConfig
+from tracker.pipeline import Pipeline
+from tracker.recording.replay import first_difference
+from tracker.recording.source import McapSource
+from tracker.recording.writer import Recorder, RunInfo
+from tracker.runner import FAULT_RECORDING, Health, Runner
+from tracker.sources import ImageSequenceSource
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _tracker(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "tracker", *args], capture_output=True, text=True, timeout=300, **kw)
+
+
+@pytest.fixture(scope="module")
+def recorded(scene_dir, tmp_path_factory):
+    """A live run on the scene's frames: (recording, live pose stream)."""
+    out = tmp_path_factory.mktemp("rec")
+    rec, poses = out / "run.mcap", out / "live.jsonl"
+    proc = _tracker("run", "--source", str(scene_dir / "frames" / "%05d.png"), "--calibration",
+                    str(scene_dir / "calibration.yaml"), "--fps", "30", "--no-plc", "--quiet",
+                    "--record", str(rec), "--poses", str(poses))
+    assert proc.returncode == 0, proc.stderr
+    return rec, poses
+
+
+def test_replay_is_byte_identical_to_the_live_run(recorded, tmp_path, capsys):
+    rec, live = recorded
+    replayed = tmp_path / "replayed.jsonl"
+    assert main(["replay", str(rec), "--check", "--poses", str(replayed)]) == 0
+    assert replayed.read_bytes() == live.read_bytes()
+    assert "identical" in capsys.readouterr().out
+
+
+def test_frames_come_back_bit_exact_with_their_capture_times(recorded, scene_dir):
+    rec, _ = recorded
+    original = ImageSequenceSource(str(scene_dir / "frames" / "%05d.png"), fps=30.0)
+    source = McapSource(str(rec), None)
+    pairs = list(zip(original, source, strict=True))
+    assert len(pairs) > 40
+    for a, b in pairs:
+        assert a.index == b.index and a.t_ns == b.t_ns
+        assert a.image.dtype == b.image.dtype and np.array_equal(a.image, b.image)
+    # The recording carries its own calibration and configuration: nothing else is needed.
+    assert np.array_equal(source.calibration.belt_homography,
+                          calib_io.load(scene_dir / "calibration.yaml").belt_homography)
+    assert source.config == TrackerConfig()
+
+
+def test_recording_opens_with_the_mcap_reader_as_foxglove_types(recorded):
+    rec, live = recorded
+    with open(rec, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        names = {s.name for s in summary.schemas.values()}
+        assert {"foxglove.RawImage", "foxglove.ImageAnnotations"} <= names
+        assert {s.encoding for s in summary.schemas.values()} == {"jsonschema"}
+        n_live = len(live.read_text().splitlines())
+        by_topic = {}
+        for schema, channel, message in reader.iter_messages():
+            by_topic.setdefault(channel.topic, []).append((schema.name, message))
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+        attachments = {a.name: a for a in reader.iter_attachments()}
+    images = [m for s, m in by_topic["/camera/image"] if s == "foxglove.RawImage"]
+    assert len(images) == n_live
+    first = json.loads(images[0].data)
+    assert first["encoding"] == "mono8" and first["step"] == first["width"]
+    assert images[0].log_time == 0 and images[1].log_time == round(1e9 / 30)
+    annotations = [json.loads(m.data) for s, m in by_topic["/tracker/annotations"]]
+    assert len(annotations) == n_live and any(a["points"] for a in annotations)
+    # A part's rectangle is a closed polygon of 4 image points, beside its centroid and id.
+    drawn = next(a for a in annotations if a["points"])
+    assert any(len(p["points"]) == 4 for p in drawn["points"]) and drawn["texts"]
+    # Settings, version and calibration travel with the file.
+    run = metadata["tracker.run"]
+    assert json.loads(run["config"]) == TrackerConfig().to_dict() and run["version"]
+    assert "calibration.yaml" in attachments and "overruns" in metadata["tracker.end"]
+
+
+def test_check_names_the_first_differing_frame_and_field(recorded, tmp_path, capsys):
+    rec, _ = recorded
+    # The same frames recorded with a result the pipeline would not produce.
+    source = McapSource(str(rec), None)
+    tampered = tmp_path / "tampered.mcap"
+    info = RunInfo(source.calibration, source.config, "tampered", 30.0)
+    recorder = Recorder.open(str(tampered), info)
+    pipeline = Pipeline(source.calibration, source.config)
+    changed = None
+    for frame in source:
+        result = pipeline.process(frame.index, frame.image, frame.t_ns)
+        if result.objects and changed is None:
+            changed = frame.index
+            obj = result.objects[0]
+            result = type(result)(result.frame, result.t_ns, (type(obj)(**{**obj.__dict__, "y_mm": obj.y_mm + 0.5}),))
+        recorder.submit(frame, result)
+    recorder.close()
+    assert main(["replay", str(tampered), "--check"]) == 1
+    err = capsys.readouterr().err
+    assert f"frame {changed}" in err and "y_mm" in err
+    assert first_difference({"a": [1, {"b": 2}]}, {"a": [1, {"b": 3}]}) == "a[1].b: live 2, replay 3"
+
+
+@pytest.mark.parametrize("fraction", [0.3, 0.55, 0.8, 0.999])
+def test_a_cut_recording_replays_up_to_where_it_ends(recorded, tmp_path, fraction):
+    rec, live = recorded
+    data = rec.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: int(len(data) * fraction)])
+    poses = tmp_path / "poses.jsonl"
+    proc = _tracker("replay", str(cut), "--check", "--poses", str(poses))
+    assert proc.returncode == 0, proc.stderr
+    assert "without its summary" in proc.stderr or "cut short" in proc.stderr
+    replayed = poses.read_text().splitlines()
+    assert replayed == live.read_text().splitlines()[: len(replayed)]
+    if fraction > 0.75:  # past the first chunk (~1 s of frames)
+        assert len(replayed) >= 25
+
+
+def test_sigkill_leaves_a_recording_that_replays(scene_dir, tmp_path):
+    rec = tmp_path / "killed.mcap"
+    # Rendering the synthetic demo live is slow enough for the run to be killed in the middle.
+    proc = subprocess.Popen([sys.executable, "-m", "tracker", "synth", "demo", "--record", str(rec)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    # Wait until at least two chunks (~1 s of frames each) reached the file.
+    while time.monotonic() < deadline and (not rec.exists() or rec.stat().st_size < 300_000):
+        if proc.poll() is not None:
+            pytest.fail("tracker run ended before it could be killed")
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    out = tmp_path / "poses.jsonl"
+    replay = _tracker("replay", str(rec), "--poses", str(out))
+    assert replay.returncode == 0, replay.stderr
+    assert "cut short" in replay.stderr or "without its summary" in replay.stderr
+    assert len(out.read_text().splitlines()) >= 10
+
+
+class FullDisk:
+    """A file that accepts ``limit`` bytes, then fails like a full disk."""
+
+    def __init__(self, path, limit):
+        self.f = open(path, "wb")  # noqa: SIM115
+        self.limit = limit
+
+    def write(self, data):
+        if self.f.tell() + len(data) > self.limit:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return self.f.write(data)
+
+    def truncate(self, size):
+        self.f.truncate(size)
+        self.f.seek(size)
+
+    def close(self):
+        self.f.close()
+
+
+def test_full_disk_stops_the_recording_and_tracking_goes_on(recorded, tmp_path, caplog):
+    rec, live = recorded
+    source = McapSource(str(rec), None)
+    health = Health()
+    path = tmp_path / "full.mcap"
+    recorder = Recorder(FullDisk(path, 400_000), str(path), RunInfo(source.calibration, source.config, "x", 30.0),
+                        health)
+    poses = tmp_path / "poses.jsonl"
+    from tracker.runner import PoseSink
+
+    runner = Runner(source, Pipeline(source.calibration, source.config), [recorder, PoseSink(str(poses))], health)
+    with pytest.raises(Exception, match="recording stopped: .*No space left on device"):
+        runner.run()
+    # Tracking went on to the end: every frame has its pose line.
+    assert poses.read_bytes() == live.read_bytes()
+    assert health.fault == FAULT_RECORDING and not health.recording_ok
+    errors = [r for r in caplog.records if r.levelname == "ERROR"]
+    assert len(errors) == 1 and "No space left" in errors[0].getMessage()
+    # What reached the disk replays.
+    assert main(["replay", str(path), "--check"]) == 0
+
+
+def test_full_tmpfs_for_real(recorded, tmp_path):
+    if os.geteuid() != 0:
+        pytest.skip("mounting a tmpfs needs root")
+    mnt = tmp_path / "small"
+    mnt.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(mnt)], capture_output=True).returncode:
+        pytest.skip("cannot mount a tmpfs here")
+    try:
+        rec, live = recorded
+        poses = tmp_path / "poses.jsonl"
+        proc = _tracker("run", "--source", str(rec), "--no-plc", "--quiet", "--record", str(mnt / "r.mcap"),
+                        "--poses", str(poses))
+        assert proc.returncode == 1
+        assert "No space left on device" in proc.stderr and "Traceback" not in proc.stderr
+        assert poses.read_bytes() == live.read_bytes()  # tracking continued to the last frame
+        assert main(["replay", str(mnt / "r.mcap"), "--check"]) == 0
+    finally:
+        subprocess.run(["umount", str(mnt)], check=False)
+
+
+def test_unwritable_path_is_bad_input_and_leaves_nothing(tmp_path, scene_dir, capsys):
+    target = tmp_path / "missing" / "r.mcap"
+    code = main(["run", "--source", str(scene_dir / "frames" / "%05d.png"), "--calibration",
+                 str(scene_dir / "calibration.yaml"), "--fps", "30", "--no-plc", "--quiet", "--record", str(target)])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "cannot write the recording" in err and len(err.strip().splitlines()) == 1
+    assert not target.parent.exists()
+
+
+def test_recording_as_a_camera_and_the_bundled_demos_replay_exactly(tmp_path):
+    recordings = sorted((ROOT / "recordings").glob("*.mcap"))
+    assert recordings, "recordings/ must hold the bundled demo"
+    for rec in recordings:
+        assert rec.stat().st_size <= 5 * 2**20
+        assert main(["replay", str(rec), "--check"]) == 0, rec
+    poses = tmp_path / "p.jsonl"
+    assert main(["run", "--source", str(recordings[0]), "--no-plc", "--quiet", "--poses", str(poses)]) == 0
+    assert any(json.loads(line)["objects"] for line in poses.read_text().splitlines())
+
+
+def test_unreadable_recording_is_bad_input(tmp_path, capsys):
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"not an mcap file at all")
+    assert main(["replay", str(junk)]) == 2
+    assert "junk.mcap" in capsys.readouterr().err

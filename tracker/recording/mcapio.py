@@ -1,0 +1,318 @@
+"""MCAP on disk: a chunked writer that survives being killed, and a reader that survives truncation.
+
+The writer is built from the ``mcap`` package's record classes rather than its ``Writer``
+because a recording needs three things that class does not offer: chunks closed by
+time (about one second each) and written to the OS as soon as they are closed, so a
+SIGKILL loses at most the chunk in progress; compression of a chunk in another thread
+than the one that builds the next (the ``ChunkBuilder``/``write_chunk`` split); and the
+choice of compression level and threads. Schemas, channels, metadata and attachments
+go in the data section before the first chunk, so a file cut anywhere after them still
+says how to decode and replay everything before the cut. The summary and footer
+written by ``finish`` make the file seekable (Foxglove, ``mcap`` readers).
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any, BinaryIO, Protocol
+
+import lz4.frame
+import zstandard
+from mcap.data_stream import RecordBuilder
+from mcap.exceptions import EndOfFile, McapError
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    Message,
+    MessageIndex,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+from mcap.stream_reader import StreamReader
+
+from tracker import __version__
+
+MAGIC = bytes((0x89, ord("M"), ord("C"), ord("A"), ord("P"), ord("0"), 0x0D, 0x0A))
+LIBRARY = f"belt-tracker/{__version__}"
+COMPRESSIONS = ("zstd", "lz4", "none")
+# MCAP opcodes of the summary groups (spec), for the summary offsets.
+_OP_SCHEMA, _OP_CHANNEL, _OP_CHUNK_INDEX = 0x03, 0x04, 0x08
+_OP_ATTACHMENT_INDEX, _OP_STATISTICS, _OP_METADATA_INDEX = 0x0A, 0x0B, 0x0D
+
+
+class Output(Protocol):
+    def write(self, data: bytes | memoryview) -> Any: ...
+
+
+class RawFile:
+    """An unbuffered file: every ``write`` reaches the OS before it returns (no Python buffer
+    to lose on SIGKILL), and a failed write can be undone with ``truncate``."""
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+
+    def write(self, data: bytes | memoryview) -> int:
+        view = memoryview(data)
+        while view:
+            n = os.write(self._fd, view)
+            if n == 0:  # a regular file only writes short when it is out of space
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            view = view[n:]
+        return len(data)
+
+    def truncate(self, size: int) -> None:
+        os.ftruncate(self._fd, size)
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
+
+
+@dataclass(frozen=True)
+class Compression:
+    kind: str = "zstd"
+    level: int = 1
+    # zstd worker threads (0: compress in the calling thread).
+    threads: int = 0
+
+    def __post_init__(self) -> None:
+        if self.kind not in COMPRESSIONS:
+            raise ValueError(f"compression: expected one of {COMPRESSIONS}, got {self.kind!r}")
+
+    @property
+    def name(self) -> str:
+        return "" if self.kind == "none" else self.kind
+
+    def compressor(self):
+        if self.kind == "zstd":
+            zc = zstandard.ZstdCompressor(level=self.level, threads=self.threads)
+            return zc.compress
+        if self.kind == "lz4":
+            return lz4.frame.compress
+        return bytes
+
+
+@dataclass
+class OpenChunk:
+    """Messages of one chunk, serialised but not yet compressed."""
+
+    records: RecordBuilder = field(default_factory=RecordBuilder)
+    start_ns: int = 0
+    end_ns: int = 0
+    messages: int = 0
+    index: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
+    per_channel: dict[int, int] = field(default_factory=dict)
+
+    @property
+    def size(self) -> int:
+        return self.records.count
+
+    def add(self, channel_id: int, log_time_ns: int, data: bytes, sequence: int = 0) -> None:
+        if self.messages == 0:
+            self.start_ns = self.end_ns = log_time_ns
+        self.start_ns = min(self.start_ns, log_time_ns)
+        self.end_ns = max(self.end_ns, log_time_ns)
+        self.index.setdefault(channel_id, []).append((log_time_ns, self.records.count))
+        self.per_channel[channel_id] = self.per_channel.get(channel_id, 0) + 1
+        self.messages += 1
+        Message(channel_id=channel_id, sequence=sequence & 0xFFFFFFFF, log_time=log_time_ns,
+                publish_time=log_time_ns, data=data).write(self.records)
+
+
+class McapWriter:
+    """Writes records to ``out`` (anything with ``write(bytes)``); keeps the offsets itself."""
+
+    def __init__(self, out: Output, compression: Compression | None = None) -> None:
+        self._out = out
+        self._compress = (compression or Compression()).compressor()
+        self._compression_name = (compression or Compression()).name
+        self.bytes_written = 0
+        self._schemas: list[Schema] = []
+        self._channels: list[Channel] = []
+        self._chunk_indexes: list[ChunkIndex] = []
+        self._attachment_indexes: list[AttachmentIndex] = []
+        self._metadata_indexes: list[MetadataIndex] = []
+        self._stats = Statistics(message_count=0, schema_count=0, channel_count=0, attachment_count=0,
+                                 metadata_count=0, chunk_count=0, message_start_time=0, message_end_time=0,
+                                 channel_message_counts={})
+        self._builder = RecordBuilder()
+
+    def _emit(self) -> int:
+        """Write what the record builder holds; returns the offset it was written at."""
+        data = self._builder.end()
+        offset = self.bytes_written
+        self._out.write(data)
+        self.bytes_written += len(data)
+        return offset
+
+    def start(self) -> None:
+        self._out.write(MAGIC)
+        self.bytes_written += len(MAGIC)
+        Header(profile="", library=LIBRARY).write(self._builder)
+        self._emit()
+
+    def add_schema(self, name: str, encoding: str, data: bytes) -> int:
+        schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
+        self._schemas.append(schema)
+        self._stats.schema_count += 1
+        schema.write(self._builder)
+        self._emit()
+        return schema.id
+
+    def add_channel(self, topic: str, message_encoding: str, schema_id: int) -> int:
+        channel = Channel(id=len(self._channels) + 1, topic=topic, message_encoding=message_encoding,
+                          schema_id=schema_id, metadata={})
+        self._channels.append(channel)
+        self._stats.channel_count += 1
+        channel.write(self._builder)
+        self._emit()
+        return channel.id
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        Metadata(name=name, metadata=data).write(self._builder)
+        length = self._builder.count
+        offset = self._emit()
+        self._metadata_indexes.append(MetadataIndex(offset=offset, length=length, name=name))
+        self._stats.metadata_count += 1
+
+    def add_attachment(self, name: str, media_type: str, data: bytes, log_time_ns: int = 0) -> None:
+        Attachment(create_time=log_time_ns, log_time=log_time_ns, name=name, media_type=media_type,
+                   data=data).write(self._builder)
+        length = self._builder.count
+        offset = self._emit()
+        self._attachment_indexes.append(AttachmentIndex(
+            offset=offset, length=length, create_time=log_time_ns, log_time=log_time_ns,
+            data_size=len(data), name=name, media_type=media_type))
+        self._stats.attachment_count += 1
+
+    def write_chunk(self, chunk: OpenChunk) -> None:
+        """Compress and write one chunk and its message indexes (one write each)."""
+        if chunk.messages == 0:
+            return
+        raw = chunk.records.end()
+        packed = self._compress(raw)
+        Chunk(compression=self._compression_name, data=packed, message_start_time=chunk.start_ns,
+              message_end_time=chunk.end_ns, uncompressed_crc=zlib.crc32(raw), uncompressed_size=len(raw)
+              ).write(self._builder)
+        chunk_length = self._builder.count
+        chunk_offset = self._emit()
+        offsets = {}
+        index_start = self.bytes_written
+        for channel_id, records in sorted(chunk.index.items()):
+            offsets[channel_id] = index_start + self._builder.count
+            MessageIndex(channel_id=channel_id, records=records).write(self._builder)
+        index_length = self._builder.count
+        self._emit()
+        self._chunk_indexes.append(ChunkIndex(
+            message_start_time=chunk.start_ns, message_end_time=chunk.end_ns, chunk_start_offset=chunk_offset,
+            chunk_length=chunk_length, message_index_offsets=offsets, message_index_length=index_length,
+            compression=self._compression_name, compressed_size=len(packed), uncompressed_size=len(raw)))
+        s = self._stats
+        if s.message_count == 0:
+            s.message_start_time = chunk.start_ns
+        s.message_start_time = min(s.message_start_time, chunk.start_ns)
+        s.message_end_time = max(s.message_end_time, chunk.end_ns)
+        s.message_count += chunk.messages
+        s.chunk_count += 1
+        for channel_id, n in chunk.per_channel.items():
+            s.channel_message_counts[channel_id] = s.channel_message_counts.get(channel_id, 0) + n
+
+    def finish(self) -> None:
+        """Data end, summary (schemas, channels, statistics, indexes, offsets), footer, magic."""
+        DataEnd(data_section_crc=0).write(self._builder)
+        self._emit()
+        summary_start = self.bytes_written
+        b = self._builder
+        groups = []
+        for opcode, records in ((_OP_SCHEMA, self._schemas), (_OP_CHANNEL, self._channels),
+                                (_OP_STATISTICS, [self._stats]), (_OP_CHUNK_INDEX, self._chunk_indexes),
+                                (_OP_ATTACHMENT_INDEX, self._attachment_indexes),
+                                (_OP_METADATA_INDEX, self._metadata_indexes)):
+            if not records:
+                continue
+            start = b.count
+            for record in records:
+                record.write(b)
+            groups.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + start,
+                                        group_length=b.count - start))
+        offsets_start = summary_start + b.count
+        for group in groups:
+            group.write(b)
+        summary = b.end()
+        # The footer's CRC covers the summary and the footer's own fields up to the CRC.
+        footer_head = bytes([0x02]) + (20).to_bytes(8, "little") + summary_start.to_bytes(8, "little") \
+            + offsets_start.to_bytes(8, "little")
+        crc = zlib.crc32(footer_head, zlib.crc32(summary))
+        self._out.write(summary)
+        self.bytes_written += len(summary)
+        Footer(summary_start=summary_start, summary_offset_start=offsets_start, summary_crc=crc).write(b)
+        self._emit()
+        self._out.write(MAGIC)
+        self.bytes_written += len(MAGIC)
+
+
+# --- reading ------------------------------------------------------------------------------------
+
+class _Exact:
+    """A file whose ``read(n)`` returns n bytes or raises EndOfFile: the ``mcap`` stream reader
+    only notices an empty read, and would otherwise parse a record cut short as if whole."""
+
+    def __init__(self, f: BinaryIO) -> None:
+        self._f = f
+        self.position = 0
+
+    def read(self, n: int) -> bytes:
+        data = self._f.read(n)
+        self.position += len(data)
+        if len(data) < n:
+            raise EndOfFile()
+        return data
+
+
+@dataclass
+class ReadEnd:
+    """How a sequential read ended."""
+
+    complete: bool = False  # the footer and closing magic were read
+    truncated: bool = False  # the file ends inside (or instead of) a record
+    damaged: str = ""  # a record could not be decoded (CRC, compression, format)
+    position: int = 0  # bytes read
+
+    def describe(self, path: str) -> str:
+        if self.complete:
+            return f"{path}: complete"
+        if self.damaged:
+            return f"{path}: damaged at byte {self.position}: {self.damaged}"
+        return f"{path}: ends at byte {self.position} without its summary (cut short: the last chunk is incomplete)"
+
+
+def iter_records(f: BinaryIO, end: ReadEnd, emit_chunks: bool = False) -> Iterator[Any]:
+    """Every record of an MCAP stream in file order (messages taken out of their chunks,
+    CRC-checked); stops quietly at a truncation or damage and says which in ``end``."""
+    exact = _Exact(f)
+    reader = StreamReader(exact, emit_chunks=emit_chunks, validate_crcs=True)
+    try:
+        for record in reader.records:
+            yield record
+            if isinstance(record, Footer):
+                end.complete = True
+    except EndOfFile:
+        end.truncated = not end.complete
+    except (McapError, ValueError, zstandard.ZstdError, RuntimeError, UnicodeDecodeError, KeyError) as exc:
+        end.damaged = str(exc) or type(exc).__name__
+    finally:
+        end.position = exact.position
