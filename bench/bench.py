@@ -229,6 +229,9 @@ def soak(frames_total: int) -> dict:
         pipeline.process(i, frames[i % n], i * dt_ns)
         if (i + 1) % max(1, frames_total // 10) == 0:
             checkpoints.append((i + 1, round(current_rss_mb(), 1)))
+            # Progress as it goes: a long soak that is stopped early still says what it saw.
+            print(f"soak: {i + 1} frames, RSS {checkpoints[-1][1]} MB (start {start_rss:.1f} MB)",
+                  file=sys.stderr, flush=True)
     return {"frames": frames_total, "seconds": time.perf_counter() - t0, "rss_start_mb": start_rss,
             "rss_end_mb": current_rss_mb(), "rss_checkpoints_mb": checkpoints}
 
