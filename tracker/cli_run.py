@@ -16,7 +16,7 @@ from tracker.errors import BadInput
 from tracker.pipeline import Pipeline
 from tracker.runner import Health, PoseSink, Runner, Sink, StatusLine
 from tracker.scenes import SyntheticSource, preset
-from tracker.sources import Prefetch, open_source
+from tracker.sources import Paced, Prefetch, open_source
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--record", metavar="OUT.mcap", help="record every frame and result to MCAP")
     p.add_argument("--poses", metavar="OUT.jsonl", help="write the pose stream (JSON Lines)")
     p.add_argument("--fps", type=float, help="frame rate of a file source (default: from the container)")
+    p.add_argument("--realtime", action="store_true",
+                   help="play a file or recording at its recorded rate, like a camera (the demo does)")
     p.add_argument("--config", metavar="FILE.json", help="pipeline settings (see tracker/config.py)")
     p.add_argument("--max-frames", type=int, help="stop after this many frames")
     p.add_argument("--quiet", action="store_true", help="no live status line")
@@ -66,7 +68,8 @@ def load_config(path: str | None) -> TrackerConfig:
 
 def open_inputs(args: argparse.Namespace):
     """The source and its calibration (and the configuration the source may carry)."""
-    if args.source is None:
+    demo = args.source is None
+    if demo:
         if DEMO_RECORDING.is_file():
             args.source = str(DEMO_RECORDING)
         else:
@@ -79,6 +82,8 @@ def open_inputs(args: argparse.Namespace):
     source = open_source(args.source, args.fps)
     if not source.live:
         source = Prefetch(source)
+        if args.realtime or demo:
+            source = Paced(source)
     recorded_config = getattr(source, "config", None)
     if calibration is None:
         calibration = source.calibration

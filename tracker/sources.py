@@ -253,6 +253,32 @@ class Prefetch(FrameSource):
         self.source.close()
 
 
+class Paced(FrameSource):
+    """Delivers a file source's frames at their recorded rate, like the camera that made them."""
+
+    def __init__(self, source: FrameSource) -> None:
+        self.source = source
+        self.name = source.name
+        self._stop = threading.Event()
+
+    def __getattr__(self, name: str):
+        return getattr(self.source, name)
+
+    def __iter__(self) -> Iterator[Frame]:
+        start_wall = start_t = None
+        for frame in self.source:
+            if start_wall is None:
+                start_wall, start_t = time.monotonic_ns(), frame.t_ns
+            due_ns = start_wall + (frame.t_ns - start_t) - time.monotonic_ns()
+            if due_ns > 0 and self._stop.wait(due_ns / 1e9):
+                return
+            yield dataclasses.replace(frame, arrival_ns=time.monotonic_ns())
+
+    def close(self) -> None:
+        self._stop.set()
+        self.source.close()
+
+
 def open_source(spec: str, fps: float | None = None) -> FrameSource:
     """Camera index, video file, printf image pattern or ``.mcap`` recording."""
     if fps is not None and not fps > 0:
