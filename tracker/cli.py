@@ -20,6 +20,7 @@ COMMAND_MODULES = (
     "tracker.cli_synth",
     "tracker.cli_evaluate",
     "plc.cli",
+    "tracker.calibrate.cli",
 )
 
 
