@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "tracker.cli_evaluate",
     "tracker.recording.cli",
     "plc.cli",
+    "tracker.calibrate.cli",
 )
 
 

@@ -1,0 +1,155 @@
+"""``tracker calibrate intrinsics | belt | show``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import cv2
+
+from tracker import calibration as calibfile
+from tracker.calibrate import report
+from tracker.calibrate.belt import belt_from_board, belt_from_points, draw_preview, read_pairs
+from tracker.calibrate.board import DETECTORS, parse_pattern
+from tracker.calibrate.images import read_all_same_size, read_grey
+from tracker.calibrate.intrinsics import calibrate_intrinsics
+from tracker.calibrate.settings import DEFAULTS
+from tracker.errors import BadInput
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("calibrate", help="camera intrinsics and the belt pose from chessboard views")
+    csub = p.add_subparsers(dest="calibrate_command", metavar="STEP", required=True)
+
+    i = csub.add_parser("intrinsics", help="K and distortion from ~15 chessboard views")
+    i.add_argument("images", nargs="+", metavar="IMAGE")
+    _board_args(i, required=True)
+    i.add_argument("--out", required=True, metavar="CALIB", help="calibration file to write (.yaml/.yml/.xml)")
+    i.add_argument("--min-views", type=int, default=DEFAULTS.min_views,
+                   help="fewest usable views (default %(default)s)")
+    i.add_argument("--fix-k3", action="store_true", help="fit k1 k2 p1 p2 only (k3 = 0), for mild lenses")
+    i.add_argument("--max-rms", type=float, default=DEFAULTS.max_rms_px,
+                   help="refuse a calibration whose RMS exceeds this, px (default %(default)s)")
+    i.add_argument("--report", metavar="REPORT.json", help="also write the quality report as JSON")
+    i.add_argument("--preview", metavar="DIR", help="write each view with its detected corners as PNG here")
+    i.set_defaults(func=run_intrinsics)
+
+    b = csub.add_parser("belt", help="the belt pose from a board lying flat on the belt (or --points)")
+    b.add_argument("image", nargs="?", metavar="IMAGE")
+    _board_args(b, required=False)
+    b.add_argument("--calibration", required=True, metavar="CALIB", help="file from 'calibrate intrinsics'")
+    b.add_argument("--out", metavar="CALIB2", help="write here instead of updating CALIB in place")
+    b.add_argument("--points", metavar="PAIRS.csv", help="u, v, X, Y per line (>= 4 pairs) instead of a board")
+    b.add_argument("--preview", metavar="FILE.png", help="IMAGE with the world origin and X/Y axes drawn")
+    b.set_defaults(func=run_belt)
+
+    s = csub.add_parser("show", help="summary of a calibration file")
+    s.add_argument("calibration", metavar="CALIB")
+    s.set_defaults(func=run_show)
+
+
+def _board_args(p: argparse.ArgumentParser, required: bool) -> None:
+    p.add_argument("--pattern", required=required, metavar="COLSxROWS", help="inner corners, e.g. 9x6")
+    p.add_argument("--square", required=required, type=float, metavar="MM", help="square size in mm")
+    p.add_argument("--detector", choices=DETECTORS, default="auto",
+                   help="classic findChessboardCorners + cornerSubPix, sb = findChessboardCornersSB, "
+                        "auto = classic then sb (default)")
+
+
+def _check_out(path: str) -> Path:
+    out = Path(path)
+    if out.suffix.lower() not in calibfile.SUFFIXES:
+        raise BadInput(f"{out}: unsupported extension {out.suffix!r}, expected one of {', '.join(calibfile.SUFFIXES)}")
+    _check_dir(out)
+    return out
+
+
+def _check_dir(path: Path) -> None:
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise BadInput(f"{path}: folder {parent} does not exist")
+
+
+def run_intrinsics(args: argparse.Namespace) -> int:
+    pattern = parse_pattern(args.pattern, args.square)
+    out = _check_out(args.out)
+    if args.min_views < 3:
+        raise BadInput(f"--min-views: expected at least 3, got {args.min_views}")
+    report_path = Path(args.report) if args.report else None
+    if report_path:
+        _check_dir(report_path)
+    images, _ = read_all_same_size(args.images)
+    result = calibrate_intrinsics(args.images, images, pattern, args.min_views, args.fix_k3, args.detector)
+    for line in report.intrinsics_text(result, args.max_rms):
+        print(line)
+    final = result.final
+    if final.rms_px > args.max_rms:
+        raise BadInput(f"calibration RMS {final.rms_px:.3f} px exceeds {args.max_rms} px (--max-rms): "
+                       f"check the views in the table above; {out} not written")
+    calib = calibfile.Calibration(result.image_size[0], result.image_size[1], final.camera_matrix,
+                                  final.dist_coeffs, final.rms_px, source=str(out))
+    calibfile.save(calib, out)
+    print(f"wrote {out}")
+    if report_path:
+        data = json.dumps(report.intrinsics_json(result, args.max_rms), indent=2).encode()
+        report.write_atomic(report_path, data)
+        print(f"wrote {report_path}")
+    if args.preview:
+        folder = Path(args.preview)
+        folder.mkdir(parents=True, exist_ok=True)
+        for view, image in zip(result.views, images, strict=True):
+            colour = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+            if view.corners is not None:
+                cv2.drawChessboardCorners(colour, pattern.size, view.corners.astype("float32").reshape(-1, 1, 2), True)
+            cv2.imwrite(str(folder / (Path(view.path).stem + ".png")), colour)
+        print(f"wrote {len(result.views)} previews to {folder}")
+    return 0
+
+
+def run_belt(args: argparse.Namespace) -> int:
+    target = _check_out(args.out or args.calibration)
+    calib = calibfile.load(args.calibration, require_belt=False)
+    preview = Path(args.preview) if args.preview else None
+    if preview:
+        _check_dir(preview)
+    if preview and not args.image:
+        raise BadInput("--preview needs IMAGE (the view to draw on)")
+    image = read_grey(args.image) if args.image else None
+    names = None
+    if args.points:
+        px, mm = read_pairs(args.points)
+        if image is not None:
+            h, w = image.shape[:2]
+            if (w, h) != calib.size:
+                raise BadInput(f"{args.image}: image is {w}x{h}, calibration {calib.source} is for "
+                               f"{calib.image_width}x{calib.image_height}")
+        result = belt_from_points(calib, px, mm, args.points)
+        names = [str(n + 1) for n in range(len(px))]
+        axis_mm = float(max(mm.max(axis=0) - mm.min(axis=0)) / 2)
+    else:
+        if image is None or args.pattern is None or args.square is None:
+            raise BadInput("calibrate belt: expected IMAGE with --pattern and --square, or --points PAIRS.csv")
+        pattern = parse_pattern(args.pattern, args.square)
+        result = belt_from_board(calib, image, args.image, pattern, args.detector)
+        axis_mm = 2 * pattern.square_mm
+    for line in report.belt_text(result, names):
+        print(line)
+    calibfile.save(result.calibration, target)
+    print(f"wrote {target}" + ("" if args.out else " (updated in place)"))
+    if preview:
+        ok = cv2.imwrite(str(preview), draw_preview(image, result, axis_mm))
+        if not ok:
+            raise BadInput(f"{preview}: cannot write the preview (expected a .png file)")
+        print(f"wrote {preview}")
+    return 0
+
+
+def run_show(args: argparse.Namespace) -> int:
+    calib = calibfile.load(args.calibration, require_belt=False)
+    for line in report.show_text(calib):
+        print(line)
+    return 0
+
+
+__all__ = ["register"]
