@@ -17,24 +17,14 @@ import numpy as np
 
 from tracker.calibration import Calibration, homography_from_pose
 from tracker.geometry import rectangle_corners, wrap_angle_deg
+from tracker.raycast import edge_pixels, interpolate, pixel_rays, subpixel_pattern
 
 # k1, k2, p1, p2, k3 of a wide-angle machine-vision lens (strong barrel distortion).
 STRONG_DISTORTION = (-0.32, 0.12, 0.0008, -0.0006, -0.02)
-_EXACT = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
 # Face shading relative to the top face: sides facing X and Y.
 _SIDE_SHADE = (0.8, 0.65)
 # Step (px) of the coarse grid that locates each box before the per-pixel pass.
 _COARSE_STEP = 4
-
-
-def _subpixel_pattern(s: int) -> tuple[np.ndarray, np.ndarray]:
-    """S*S sample offsets in a pixel, multi-jittered: one per cell of an S x S grid and
-    every x (and every y) distinct, so an edge parallel to the pixel grid is resolved
-    to 1/S^2 of a pixel, not 1/S."""
-    i, j = np.meshgrid(np.arange(s), np.arange(s), indexing="ij")
-    u = (i + (j + 0.5) / s) / s - 0.5
-    v = (j + (i + 0.5) / s) / s - 0.5
-    return u.reshape(1, -1), v.reshape(1, -1)
 
 
 @dataclass(frozen=True)
@@ -135,10 +125,7 @@ class Renderer:
         calib = self.calibration
         rot = calib.rotation()
         self._centre = -rot.T @ calib.belt_tvec.reshape(3)
-        u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
-        pix = np.stack([u, v], axis=-1).reshape(-1, 1, 2)
-        norm = cv2.undistortPoints(pix, calib.camera_matrix, calib.dist_coeffs, criteria=_EXACT)
-        norm = norm.reshape(cam.height, cam.width, 2)
+        norm = pixel_rays(calib.camera_matrix, calib.dist_coeffs, cam.width, cam.height)
         # World direction of the ray through each pixel centre (not normalised; linear in x, y).
         self._rays = norm[..., 0:1] * rot[0] + norm[..., 1:2] * rot[1] + rot[2]
         self._background = self._belt_image()
@@ -181,19 +168,6 @@ class Renderer:
         face = np.array([2, 3, 1], dtype=np.uint8)[near_all.argmax(axis=0)]
         return np.where(hit, face, 0).astype(np.uint8)
 
-    def _rays_at(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Bilinear interpolation of the exact pixel-centre rays at sub-pixel positions."""
-        h, w = self._rays.shape[:2]
-        u = np.clip(u, 0, w - 1.000001)
-        v = np.clip(v, 0, h - 1.000001)
-        u0, v0 = np.floor(u).astype(np.intp), np.floor(v).astype(np.intp)
-        fu, fv = (u - u0)[..., None], (v - v0)[..., None]
-        r = self._rays
-        return (
-            r[v0, u0] * (1 - fu) * (1 - fv) + r[v0, u0 + 1] * fu * (1 - fv)
-            + r[v0 + 1, u0] * (1 - fu) * fv + r[v0 + 1, u0 + 1] * fu * fv
-        )
-
     def _roi(self, part: PartSpec, poses: list[tuple[float, float, float]]) -> tuple[int, int, int, int] | None:
         step = _COARSE_STEP
         coarse = self._rays[::step, ::step]
@@ -217,17 +191,12 @@ class Renderer:
         cover = np.zeros((3, *labels.shape), dtype=np.float32)
         for face in (1, 2, 3):
             cover[face - 1][labels == face] = 1.0
-        padded = np.pad(labels, 1, mode="edge")
-        edge = np.zeros(labels.shape, dtype=bool)
-        for dr in (0, 1, 2):
-            for dc in (0, 1, 2):
-                edge |= padded[dr : dr + labels.shape[0], dc : dc + labels.shape[1]] != labels
-        er, ec = np.nonzero(edge)
+        er, ec = edge_pixels(labels)
         if er.size:
-            ou, ov = _subpixel_pattern(self.scene.supersample)
+            ou, ov = subpixel_pattern(self.scene.supersample)
             su = (ec + c0)[:, None] + ou
             sv = (er + r0)[:, None] + ov
-            sub = self._hits(self._rays_at(su, sv), part, pose)
+            sub = self._hits(interpolate(self._rays, su, sv), part, pose)
             for face in (1, 2, 3):
                 cover[face - 1, er, ec] = (sub == face).mean(axis=1)
         return cover

@@ -33,5 +33,3 @@ class CalibrateSettings:
 
 
 DEFAULTS = CalibrateSettings()
-# Iterate undistortion to convergence (OpenCV's default of 5 iterations is ~0.1 px off near the border).
-EXACT_UNDISTORT = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from tracker.calibrate.board import Pattern
-from tracker.calibrate.settings import EXACT_UNDISTORT
+from tracker.raycast import edge_pixels, interpolate, pixel_rays, subpixel_pattern
 
 
 @dataclass(frozen=True)
@@ -41,9 +41,7 @@ class BoardRenderer:
         self.width, self.height = size
         self.pattern = pattern
         self.look = look
-        u, v = np.meshgrid(np.arange(self.width, dtype=np.float64), np.arange(self.height, dtype=np.float64))
-        pix = np.stack([u, v], axis=-1).reshape(-1, 1, 2)
-        norm = cv2.undistortPoints(pix, self.k, self.d, criteria=EXACT_UNDISTORT).reshape(self.height, self.width, 2)
+        norm = pixel_rays(self.k, self.d, self.width, self.height)
         # Camera-frame ray (x, y, 1) of each pixel centre.
         self._rays = np.concatenate([norm, np.ones((self.height, self.width, 1))], axis=2)
 
@@ -56,18 +54,11 @@ class BoardRenderer:
         t = np.asarray(tvec, dtype=np.float64).reshape(3) + z_mm * rot[:, 2]
         grey = self._shade(self._rays, rot, t)
         # Supersample pixels whose neighbourhood is not uniform (edges of squares and of the board).
-        padded = np.pad(grey, 1, mode="edge")
-        edge = np.zeros(grey.shape, dtype=bool)
-        for dr in (0, 1, 2):
-            for dc in (0, 1, 2):
-                edge |= padded[dr : dr + grey.shape[0], dc : dc + grey.shape[1]] != grey
-        er, ec = np.nonzero(edge)
-        s = self.look.supersample
-        offs = (np.arange(s) + 0.5) / s - 0.5
-        ou, ov = np.meshgrid(offs, offs)
-        su = ec[:, None] + ou.reshape(1, -1)
-        sv = er[:, None] + ov.reshape(1, -1)
-        grey[er, ec] = self._shade(self._rays_at(su, sv), rot, t).mean(axis=1)
+        er, ec = edge_pixels(grey)
+        ou, ov = subpixel_pattern(self.look.supersample)
+        su = ec[:, None] + ou
+        sv = er[:, None] + ov
+        grey[er, ec] = self._shade(interpolate(self._rays, su, sv), rot, t).mean(axis=1)
         rng = np.random.default_rng(seed)
         if self.look.noise_sigma:
             grey = grey + rng.normal(0.0, self.look.noise_sigma, grey.shape)
@@ -91,19 +82,6 @@ class BoardRenderer:
         black = on_squares & ((np.floor(bx) + np.floor(by)) % 2 == 0)
         grey = np.where(on_print, np.where(black, look.black, look.white), look.background)
         return grey.astype(np.float64)
-
-    def _rays_at(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Bilinear interpolation of the exact pixel-centre rays at sub-pixel positions."""
-        r = self._rays
-        h, w = r.shape[:2]
-        u = np.clip(u, 0, w - 1.000001)
-        v = np.clip(v, 0, h - 1.000001)
-        u0, v0 = np.floor(u).astype(np.intp), np.floor(v).astype(np.intp)
-        fu, fv = (u - u0)[..., None], (v - v0)[..., None]
-        return (
-            r[v0, u0] * (1 - fu) * (1 - fv) + r[v0, u0 + 1] * fu * (1 - fv)
-            + r[v0 + 1, u0] * (1 - fu) * fv + r[v0 + 1, u0 + 1] * fu * fv
-        )
 
 
 def look_at_pose(target_cam_mm: np.ndarray, tilt_deg: float, tilt_dir_deg: float, spin_deg: float,
