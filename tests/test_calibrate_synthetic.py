@@ -122,3 +122,33 @@ def test_belt_from_point_pairs_rejects_a_wrong_pair(intrinsics_run, tmp_path, ca
     err = np.linalg.norm(BeltMapper(got).to_mm(gpx.reshape(-1, 2)) - grid, axis=1)
     assert err.mean() < 1.0
     assert abs(got.camera_height_mm() - 700.0) < 5.0
+
+
+def test_a_view_from_another_lens_is_rejected_as_an_outlier(tmp_path, capsys):
+    from calib_support import VIEW_PATTERN
+
+    from tracker.calibrate.synthetic_board import BoardRenderer, look_at_pose
+
+    # One view taken through a different lens (focal +15 %, other distortion): it cannot fit the others.
+    c = true_calibration()
+    k_other = c.camera_matrix.copy()
+    k_other[0, 0] *= 1.15
+    k_other[1, 1] *= 1.15
+    other = BoardRenderer(k_other, np.array([[0.1, 0.0, 0.0, 0.0, 0.0]]), c.size, VIEW_PATTERN)
+    rvec, tvec = look_at_pose(np.array([60.0, -40.0, 420.0]), 35.0, 120.0, 10.0, VIEW_PATTERN)
+    odd = other.render(rvec, tvec, seed=7)
+    paths = write_views(tmp_path, intrinsic_views()) + write_views(tmp_path, [odd], prefix="odd")
+    out, rep = tmp_path / "cam.yaml", tmp_path / "report.json"
+    assert main(["calibrate", "intrinsics", *paths, "--pattern", "9x6", "--square", "20",
+                 "--out", str(out), "--report", str(rep)]) == 0
+    text = capsys.readouterr().out
+    report = json.loads(rep.read_text())
+    rejected = [v for v in report["views"] if v["rejected"]]
+    assert [Path(v["file"]).name for v in rejected] == ["odd00.png"]
+    assert "odd00.png" in text and "REJECTED" in text
+    assert report["written"] == "without_outliers" and report["without_outliers"]["n_views"] == 15
+    # Without it, the written camera is the true one again; with it, the fit was worse.
+    truth = c.camera_matrix[0, 0]
+    fx = calibration.load(out, require_belt=False).camera_matrix[0, 0]
+    assert abs(fx / truth - 1) < 1e-3
+    assert report["all_views"]["rms_px"] > 2 * report["without_outliers"]["rms_px"]
