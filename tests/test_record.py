@@ -115,6 +115,10 @@ def test_check_names_the_first_differing_frame_and_field(recorded, tmp_path, cap
     assert main(["replay", str(tampered), "--check"]) == 1
     err = capsys.readouterr().err
     assert f"frame {changed}" in err and "y_mm" in err
+    # A tolerance (for replays on another CPU type) accepts small differences, not large ones.
+    assert main(["replay", str(tampered), "--check", "--tolerance", "0.6"]) == 0
+    assert main(["replay", str(tampered), "--check", "--tolerance", "0.4"]) == 1
+    assert main(["replay", str(tampered), "--check", "--tolerance", "-1"]) == 2
     assert first_difference({"a": [1, {"b": 2}]}, {"a": [1, {"b": 3}]}) == "a[1].b: live 2, replay 3"
 
 

@@ -6,7 +6,7 @@ import argparse
 import logging
 import sys
 
-from tracker.errors import RecordingError
+from tracker.errors import BadInput, RecordingError
 from tracker.recording.replay import replay
 
 log = logging.getLogger(__name__)
@@ -20,12 +20,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("recording", metavar="REC.mcap", help="a recording made with 'tracker run --record'")
     p.add_argument("--poses", metavar="OUT.jsonl", help="write the replayed pose stream (JSON Lines)")
     p.add_argument("--check", action="store_true", help="compare every pose with the one logged live")
+    p.add_argument("--tolerance", type=float, default=0.0, metavar="X",
+                   help="with --check, accept numbers that differ by up to X (mm, deg, mm/s): for a replay on "
+                        "another CPU type, whose floating-point rounding may differ in the last digit "
+                        "(default 0: byte-identical)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    report = replay(args.recording, args.poses, args.check, None if args.quiet else sys.stderr)
+    if not args.tolerance >= 0:
+        raise BadInput(f"--tolerance: expected a number >= 0, got {args.tolerance}")
+    report = replay(args.recording, args.poses, args.check, args.tolerance, None if args.quiet else sys.stderr)
     end = report.end
     if end.damaged:
         raise RecordingError(f"{end.describe(args.recording)}; replayed the {report.frames} frames before it")

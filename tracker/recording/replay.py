@@ -80,25 +80,30 @@ class Progress:
             self._out.flush()
 
 
-def first_difference(live, replayed, where: str = "") -> str | None:
-    """The path of the first field that differs (``objects[0].x_mm``) with both values."""
+def first_difference(live, replayed, where: str = "", tolerance: float = 0.0) -> str | None:
+    """The path of the first field that differs (``objects[0].x_mm``) with both values; numbers
+    within ``tolerance`` of each other are equal."""
     if isinstance(live, dict) and isinstance(replayed, dict):
         for key in list(live) + [k for k in replayed if k not in live]:
             if key not in live or key not in replayed:
                 side = "replay" if key in replayed else "live run"
                 return f"{where}{'.' if where else ''}{key}: present only in the {side}"
-            found = first_difference(live[key], replayed[key], f"{where}{'.' if where else ''}{key}")
+            found = first_difference(live[key], replayed[key], f"{where}{'.' if where else ''}{key}", tolerance)
             if found:
                 return found
         return None
     if isinstance(live, list) and isinstance(replayed, list):
         for i, (a, b) in enumerate(zip(live, replayed, strict=False)):
-            found = first_difference(a, b, f"{where}[{i}]")
+            found = first_difference(a, b, f"{where}[{i}]", tolerance)
             if found:
                 return found
         if len(live) != len(replayed):
             return f"{where}: {len(live)} items live, {len(replayed)} in the replay"
         return None
+    numbers = (int, float)
+    if (tolerance and isinstance(live, numbers) and isinstance(replayed, numbers)
+            and not isinstance(live, bool) and not isinstance(replayed, bool)):
+        return None if abs(live - replayed) <= tolerance else f"{where}: live {live!r}, replay {replayed!r}"
     if type(live) is not type(replayed) or live != replayed:
         return f"{where}: live {live!r}, replay {replayed!r}"
     return None
@@ -109,7 +114,7 @@ def _line(d: dict) -> str:
     return json.dumps(d, allow_nan=False, separators=(", ", ": ")) + "\n"
 
 
-def replay(path: str, poses_out: str | None = None, check: bool = False,
+def replay(path: str, poses_out: str | None = None, check: bool = False, tolerance: float = 0.0,
            progress_out: TextIO | None = sys.stderr) -> ReplayReport:
     recording = Recording(path)
     info = recording.info
@@ -129,7 +134,7 @@ def replay(path: str, poses_out: str | None = None, check: bool = False,
             if out is not None:
                 out.write(line)
             if check:
-                _compare(path, frame.index, recorded.poses, result.to_dict(), line)
+                _compare(path, frame.index, recorded.poses, result.to_dict(), line, tolerance)
                 report.checked += 1
             report.frames += 1
             if progress:
@@ -145,13 +150,16 @@ def replay(path: str, poses_out: str | None = None, check: bool = False,
     return report
 
 
-def _compare(path: str, index: int, live: dict | None, replayed: dict, line: str) -> None:
+def _compare(path: str, index: int, live: dict | None, replayed: dict, line: str, tolerance: float = 0.0) -> None:
     if live is None:
         raise ReplayMismatch(f"{path}: frame {index}: no poses were logged live for this frame")
     logged = pose_line_of(live)
     if _line(logged) == line:
         return
-    where = first_difference(logged, replayed) or "the serialised line differs"
+    where = first_difference(logged, replayed, tolerance=tolerance)
+    if tolerance and where is None:
+        return
+    where = where or "the serialised line differs"
     raise ReplayMismatch(f"{path}: frame {index}: replayed poses differ from the live run at {where}")
 
 
