@@ -108,15 +108,13 @@ class Measurer:
         # Pixel = (1 - c) * belt + c * part: the part's own level is uniform, the belt's is
         # not (shading), so the contrast is taken per pixel against the local reference.
         part_level = _median_u8(img8, inner)
-        contrast = part_level - belt_level
-        if np.min(np.abs(contrast)) < cfg.min_contrast:
+        inside = blob > 0
+        rows = _boundary_crossings(img8, belt_level, part_level, inside, cfg.min_contrast)
+        cols = _boundary_crossings(img8.T, belt_level.T, part_level, inside.T, cfg.min_contrast)
+        if rows is None or cols is None:
             return None
-        img = img8.astype(np.float32)
-        cover = (img - belt_level) / contrast
-        in_zone = zone > 0
-        pts = [_crossings(cover, in_zone), _crossings(cover.T, in_zone.T)[:, ::-1]]
-        points = np.concatenate(pts)
-        if points.size == 0:
+        points = np.concatenate([rows, cols[:, ::-1]])
+        if len(points) == 0:
             return None
         return points + [x0, y0]
 
@@ -132,32 +130,43 @@ def _median_u8(image: np.ndarray, mask: np.ndarray) -> float:
     return level - 0.5 + (half - below) / hist[level]
 
 
-def _crossings(cover: np.ndarray, zone: np.ndarray) -> np.ndarray:
-    """Sub-pixel edge crossings along rows of ``cover``: Nx2 (col, row).
+def _boundary_crossings(img8: np.ndarray, belt: np.ndarray, part_level: float, inside: np.ndarray,
+                        min_contrast: float) -> np.ndarray | None:
+    """Sub-pixel edge positions where each row crosses the blob's outer boundary: Nx2 (col, row).
 
-    Only edges within ~63 deg of vertical are taken here (their transition along
-    a row fits the window); the transposed call takes the others, and near 45 deg
-    both directions contribute.
+    The window of each crossing starts at the blob's first (last) pixel of the row and
+    reaches ``_HALF_WINDOW`` pixels to either side. Only rows where the boundary is within
+    ~63 deg of vertical are used (the window then holds the whole transition); the
+    transposed call takes the other edges. None when the contrast is too low to trust.
     """
     k = _HALF_WINDOW
-    rows, cols = cover.shape
-    if cols < 2 * k + 2 or rows < 3:
-        return np.zeros((0, 2))
-    c0, c1 = cover[:, :-1], cover[:, 1:]
-    # Half-open test: a pixel at exactly 0.5 still yields one crossing, never two.
-    cross = ((c0 < 0.5) != (c1 < 0.5)) & zone[:, :-1] & zone[:, 1:]
-    # Keep the window inside the ROI and away from the first/last row (for the gradient).
-    cross[:, : k - 1] = False
-    cross[:, cols - 1 - k :] = False
-    cross[0, :] = cross[-1, :] = False
-    r, j = np.nonzero(cross)
-    gx = cover[r, j + 1] - cover[r, j]
-    gy = 0.5 * (cover[r + 1, j] + cover[r + 1, j + 1] - cover[r - 1, j] - cover[r - 1, j + 1])
-    steep = np.abs(gx) >= _STEEP_RATIO * np.abs(gy)
-    r, j, gx = r[steep], j[steep], gx[steep]
-    offsets = np.arange(-k + 1, k + 1)
-    window = cover[r[:, None], j[:, None] + offsets]
-    left = j - k + 0.5  # left boundary of the window's first pixel
-    rising = gx > 0  # part on the right: the uncovered length is the edge's distance
-    length = np.where(rising, (1.0 - window).sum(axis=1), window.sum(axis=1))
-    return np.column_stack([left + length, r.astype(np.float64)])
+    n_rows, n_cols = inside.shape
+    has = inside.any(axis=1)
+    left = np.argmax(inside, axis=1)
+    right = n_cols - 1 - np.argmax(inside[:, ::-1], axis=1)
+    r = np.nonzero(has)[0]
+    # Slope of the boundary from the rows either side (columns per row).
+    ok = (r > 0) & (r < n_rows - 1)
+    r = r[ok]
+    ok = has[r - 1] & has[r + 1]
+    r = r[ok]
+    out = []
+    offsets = np.arange(-k, k)
+    for edge, rising in ((left, True), (right, False)):
+        slope = 0.5 * (edge[r + 1].astype(np.int64) - edge[r - 1])
+        rr = r[np.abs(slope) <= 1.0 / _STEEP_RATIO]
+        start = edge[rr] - k if rising else edge[rr] - k + 1
+        cols = start[:, None] + offsets + k  # the window: 2k pixels around the boundary
+        fits = (cols[:, 0] >= 0) & (cols[:, -1] < n_cols)
+        rr, cols = rr[fits], cols[fits]
+        if not len(rr):
+            continue
+        belt_w = belt[rr[:, None], cols]
+        contrast = part_level - belt_w
+        if np.min(np.abs(contrast)) < min_contrast:
+            return None
+        cover = (img8[rr[:, None], cols] - belt_w) / contrast
+        # Along the row the covered fractions add up to where the edge crosses it.
+        length = (1.0 - cover).sum(axis=1) if rising else cover.sum(axis=1)
+        out.append(np.column_stack([cols[:, 0] - 0.5 + length, rr.astype(np.float64)]))
+    return np.concatenate(out) if out else np.zeros((0, 2))
