@@ -28,10 +28,6 @@ class Accuracy:
     missed_frames: int = 0
     false_objects: int = 0
 
-    @property
-    def detected(self) -> int:
-        return self.visible_frames - self.missed_frames
-
     def summary(self) -> dict:
         def stats(values, q=95):
             a = np.abs(np.asarray(values, dtype=np.float64))

@@ -33,11 +33,6 @@ def rectangle_corners(x: float, y: float, angle_deg: float, length: float, width
     )
 
 
-def signed_area(poly: np.ndarray) -> float:
-    x, y = poly[:, 0], poly[:, 1]
-    return float(0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
-
-
 @dataclass(frozen=True)
 class Rect:
     """A rectangle on the belt: centroid, long-side angle in (-90, 90], sides (length >= width)."""
@@ -50,10 +45,6 @@ class Rect:
 
     def corners(self) -> np.ndarray:
         return rectangle_corners(self.x_mm, self.y_mm, self.angle_deg, self.length_mm, self.width_mm)
-
-    @property
-    def area_mm2(self) -> float:
-        return self.length_mm * self.width_mm
 
 
 def rect_from_sides(centre, side_a, len_a: float, len_b: float) -> Rect:

@@ -20,7 +20,7 @@ import queue
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -60,8 +60,6 @@ class RecorderConfig:
     compression: str = "zstd"
     zstd_level: int = 1
     zstd_threads: int = 0
-    # The real-time loop's camera frame id for Foxglove.
-    frame_id: str = field(default=schemas.FRAME_ID)
 
     def __post_init__(self) -> None:
         if self.compression not in COMPRESSIONS:
