@@ -82,8 +82,9 @@ class RunSummary:
 
     def line(self) -> str:
         fps = self.frames / self.seconds if self.seconds > 0 else 0.0
+        parts = f"{len(self.track_ids)} part{'' if len(self.track_ids) == 1 else 's'}"
         return (
-            f"{self.frames} frames in {self.seconds:.2f} s ({fps:.1f} fps), {len(self.track_ids)} parts tracked, "
+            f"{self.frames} frames in {self.seconds:.2f} s ({fps:.1f} fps), {parts} tracked, "
             f"{self.measured} measurements, loop p50 {self.loop_ms_p50:.2f} ms p99 {self.loop_ms_p99:.2f} ms, "
             f"{self.overruns} overruns; stopped by {self.stopped_by}"
         )
