@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from tracker.atomic import atomic_path
 from tracker.errors import CalibrationError, FrameSizeError
 
 DIST_LENGTHS = (4, 5, 8, 12, 14)
@@ -271,28 +271,21 @@ def save(calib: Calibration, path: str | os.PathLike) -> None:
     directory = path.parent if str(path.parent) else Path(".")
     if not directory.is_dir():
         raise CalibrationError(f"{path}: folder {directory} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=directory)
-    os.close(fd)
     try:
-        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
-        if not fs.isOpened():
-            raise CalibrationError(f"{path}: cannot write calibration")
-        fs.write("image_width", int(calib.image_width))
-        fs.write("image_height", int(calib.image_height))
-        fs.write("camera_matrix", calib.camera_matrix)
-        fs.write("dist_coeffs", calib.dist_coeffs.reshape(1, -1))
-        if calib.rms_reprojection_error_px is not None:
-            fs.write("rms_reprojection_error_px", float(calib.rms_reprojection_error_px))
-        if calib.has_belt:
-            fs.write("belt_rvec", calib.belt_rvec.reshape(3, 1))
-            fs.write("belt_tvec", calib.belt_tvec.reshape(3, 1))
-            fs.write("belt_homography", calib.belt_homography)
-        fs.release()
-        with open(tmp, "rb") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
+        with atomic_path(path) as tmp:
+            fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
+            if not fs.isOpened():
+                raise CalibrationError(f"{path}: cannot write calibration")
+            fs.write("image_width", int(calib.image_width))
+            fs.write("image_height", int(calib.image_height))
+            fs.write("camera_matrix", calib.camera_matrix)
+            fs.write("dist_coeffs", calib.dist_coeffs.reshape(1, -1))
+            if calib.rms_reprojection_error_px is not None:
+                fs.write("rms_reprojection_error_px", float(calib.rms_reprojection_error_px))
+            if calib.has_belt:
+                fs.write("belt_rvec", calib.belt_rvec.reshape(3, 1))
+                fs.write("belt_tvec", calib.belt_tvec.reshape(3, 1))
+                fs.write("belt_homography", calib.belt_homography)
+            fs.release()
     except OSError as exc:
         raise CalibrationError(f"{path}: cannot write calibration: {exc.strerror}") from None
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tracker.atomic import atomic_path
 from tracker.calibrate.belt import BeltResult
 from tracker.calibrate.intrinsics import IntrinsicsResult
 from tracker.calibration import Calibration
@@ -121,9 +122,5 @@ def show_text(c: Calibration) -> list[str]:
 
 
 def write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)

@@ -8,15 +8,14 @@ difference, naming the frame and the field.
 
 from __future__ import annotations
 
+import contextlib
 import json
-import os
 import sys
-import tempfile
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import IO, TextIO
 
+from tracker.atomic import atomic_path
 from tracker.errors import BadInput, TrackerError
 from tracker.pipeline import Pipeline
 from tracker.recording.mcapio import ReadEnd
@@ -121,32 +120,32 @@ def replay(path: str, poses_out: str | None = None, check: bool = False, toleran
     pipeline = Pipeline(info.calibration, info.config)
     report = ReplayReport()
     progress = Progress(progress_out, frame_count(path)) if progress_out is not None else None
-    out, tmp = _open_poses(poses_out)
-    started = time.monotonic()
-    ok = False
-    try:
-        for recorded in recording.frames():
-            frame = recorded.frame
-            w, h = frame.image.shape[1], frame.image.shape[0]
-            info.calibration.check_frame_size(w, h, f"{path} frame {frame.index}")
-            result = pipeline.process(frame.index, frame.image, frame.t_ns)
-            line = result.to_json_line()
-            if out is not None:
-                out.write(line)
-            if check:
-                _compare(path, frame.index, recorded.poses, result.to_dict(), line, tolerance)
-                report.checked += 1
-            report.frames += 1
+    with contextlib.ExitStack() as stack:
+        # The replayed poses are written to a temporary file renamed over ``poses_out`` when the
+        # replay succeeds: never a half-written file.
+        out = _open_poses(stack, poses_out)
+        started = time.monotonic()
+        try:
+            for recorded in recording.frames():
+                frame = recorded.frame
+                w, h = frame.image.shape[1], frame.image.shape[0]
+                info.calibration.check_frame_size(w, h, f"{path} frame {frame.index}")
+                result = pipeline.process(frame.index, frame.image, frame.t_ns)
+                line = result.to_json_line()
+                if out is not None:
+                    out.write(line)
+                if check:
+                    _compare(path, frame.index, recorded.poses, result.to_dict(), line, tolerance)
+                    report.checked += 1
+                report.frames += 1
+                if progress:
+                    progress.update(report.frames)
+        finally:
+            report.seconds = time.monotonic() - started
+            report.end = recording.end
+            report.end_metadata = recording.end_metadata
             if progress:
-                progress.update(report.frames)
-        ok = True
-    finally:
-        report.seconds = time.monotonic() - started
-        report.end = recording.end
-        report.end_metadata = recording.end_metadata
-        if progress:
-            progress.end(report.frames)
-        _close_poses(out, tmp, poses_out, ok)
+                progress.end(report.frames)
     return report
 
 
@@ -163,23 +162,11 @@ def _compare(path: str, index: int, live: dict | None, replayed: dict, line: str
     raise ReplayMismatch(f"{path}: frame {index}: replayed poses differ from the live run at {where}")
 
 
-def _open_poses(path: str | None) -> tuple[IO[str] | None, str | None]:
-    """Poses go to a temporary file renamed over ``path`` at the end: never a half-written file."""
+def _open_poses(stack: contextlib.ExitStack, path: str | None) -> IO[str] | None:
     if path is None:
-        return None, None
-    directory = Path(path).parent if str(Path(path).parent) else Path(".")
+        return None
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{Path(path).name}.", dir=directory)
+        tmp = stack.enter_context(atomic_path(path))
     except OSError as exc:
         raise BadInput(f"--poses {path}: cannot write the pose stream: {exc.strerror}") from None
-    return os.fdopen(fd, "w", encoding="utf-8"), tmp
-
-
-def _close_poses(out: IO[str] | None, tmp: str | None, path: str | None, ok: bool) -> None:
-    if out is None or tmp is None or path is None:
-        return
-    out.close()
-    if ok:
-        os.replace(tmp, path)
-    else:
-        os.unlink(tmp)
+    return stack.enter_context(open(tmp, "w", encoding="utf-8"))  # noqa: SIM115 - closed by the stack
