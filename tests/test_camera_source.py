@@ -131,6 +131,9 @@ def test_overruns_reach_the_health_word_and_status_line(monkeypatch):
         def __init__(self):
             self.lines = []
 
+        def due(self):
+            return True
+
         def show(self, text, force=False):
             self.lines.append(text)
 

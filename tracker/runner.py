@@ -100,6 +100,10 @@ class StatusLine:
         self._next = 0.0
         self._width = 0
 
+    def due(self) -> bool:
+        """Time for a new line (so the loop builds the text only then)."""
+        return time.monotonic() >= self._next
+
     def show(self, text: str, force: bool = False) -> None:
         now = time.monotonic()
         if not force and now < self._next:
@@ -168,7 +172,7 @@ class Runner:
                 now = time.monotonic()
                 if now - fps_t >= 0.5:
                     fps, fps_t, fps_n = fps_n / (now - fps_t), now, 0
-                if self.status:
+                if self.status and self.status.due():
                     parts = [f"frame {frame.index}", f"{fps:.0f} fps", f"loop {this_loop_ns / 1e6:.2f} ms",
                              f"objects {len(result.objects)}", describe(result)]
                     parts += [s for s in (sink.status() for sink in self.sinks) if s]
