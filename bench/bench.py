@@ -169,7 +169,8 @@ def time_full_loop(video: Path, calib, record_to: Path | None) -> dict:
     from plc.options import PlcOptions  # noqa: PLC0415
     from plc.sim import PlcSimulator  # noqa: PLC0415
     from plc.writer import PlcWriter  # noqa: PLC0415
-    from tracker.runner import Health, Runner  # noqa: PLC0415
+    from tracker.health import Health  # noqa: PLC0415
+    from tracker.runner import Runner  # noqa: PLC0415
     from tracker.sources import Prefetch  # noqa: PLC0415
 
     health = Health()

@@ -20,11 +20,11 @@ import numpy as np  # noqa: E402
 import zstandard  # noqa: E402
 
 from tracker.config import TrackerConfig  # noqa: E402
+from tracker.health import Health  # noqa: E402
 from tracker.pipeline import Pipeline  # noqa: E402
 from tracker.recording import schemas  # noqa: E402
 from tracker.recording.replay import replay  # noqa: E402
 from tracker.recording.writer import Recorder, RunInfo  # noqa: E402
-from tracker.runner import Health  # noqa: E402
 from tracker.scenes import resized, tilted  # noqa: E402
 from tracker.sources import Frame  # noqa: E402
 from tracker.synthetic import Renderer  # noqa: E402

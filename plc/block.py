@@ -19,8 +19,8 @@ from plc.registers import (
     STATUS_RECORDING_OK,
     STATUS_RUNNING,
 )
+from tracker.health import FAULT_NONE, Health
 from tracker.poses import TrackedObject
-from tracker.runner import FAULT_NONE, Health
 
 U16_MASK = 0xFFFF
 U32_MASK = 0xFFFFFFFF

@@ -12,7 +12,7 @@ from plc.options import DEFAULT_SIM_HOST, DEFAULT_SIM_PORT, PlcOptions, parse_en
 from plc.registers import BLOCK_WORDS, SERVER_REGISTERS
 from plc.sim import PlcSimulator
 from plc.writer import PlcWriter
-from tracker.runner import Health
+from tracker.health import Health
 
 log = logging.getLogger(__name__)
 

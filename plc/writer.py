@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 from plc.block import BlockBuilder, Pose, Prepared, ms_u32
 from plc.link import EXCEPTION_NAMES, Link, LinkDown, PlcRejected
 from plc.options import PlcOptions, backoff_delays
+from tracker.health import Health
 from tracker.poses import FrameResult
-from tracker.runner import Health
 from tracker.sources import Frame
 
 log = logging.getLogger(__name__)

@@ -16,8 +16,9 @@ from pathlib import Path
 
 import pytest
 
+from tracker.health import Health
 from tracker.pipeline import Pipeline
-from tracker.runner import Health, Runner
+from tracker.runner import Runner
 from tracker.scenes import nadir, resized
 from tracker.sources import Frame, FrameSource
 from tracker.synthetic import Renderer

@@ -151,3 +151,15 @@ def test_rounding_keeps_the_angle_in_range():
 
     obj = TrackedObject(1, 0.0, 0.0, -89.99996, 80.0, 50.0, np.zeros((4, 2)), 0.0, 0.0, True)
     assert obj.to_dict()["angle_deg"] == 90.0
+
+
+def test_a_part_in_view_at_start_leaves_no_lasting_ghost():
+    # The first frame is the reference, so the part's start position holds a ghost once it moves
+    # away; it must join the belt at once instead of being reported as a parked part.
+    part = PartSpec(80, 50, 0, -150, 10, 20, 300, 0)
+    poses, truths = run_pipeline(SceneSpec(CameraSpec(), (part,), n_frames=90))
+    later = 30  # 0.5 s: the part has cleared its start position by 120 mm
+    acc = evaluate(poses[later:], truths[later:])
+    assert acc.visible_frames > 40 and acc.missed_frames == 0
+    assert acc.false_objects == 0, "the ghost at x = -150 mm is still reported"
+    assert all(len(p["objects"]) == 1 for p in poses[later:])

@@ -111,8 +111,9 @@ def test_dead_camera_mid_run_ends_the_run_with_one_line(monkeypatch, capsys, tmp
 
 
 def test_overruns_reach_the_health_word_and_status_line(monkeypatch):
+    from tracker.health import FAULT_OVERRUN, Health
     from tracker.pipeline import Pipeline
-    from tracker.runner import FAULT_OVERRUN, Health, Runner
+    from tracker.runner import Runner
     from tracker.synthetic import CameraSpec
 
     _fake(monkeypatch, frames=2000)

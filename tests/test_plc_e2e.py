@@ -32,8 +32,9 @@ from plc.sink import open_plc_sink
 from plc.writer import PlcWriter
 from tracker.cli import main
 from tracker.cli_synth import write_scene
+from tracker.health import Health
 from tracker.poses import read_poses
-from tracker.runner import Health, PoseSink
+from tracker.runner import PoseSink
 
 FLOATS = ("x_mm", "y_mm", "angle_deg", "vx_mm_s", "vy_mm_s", "length_mm", "width_mm")
 

@@ -22,8 +22,8 @@ from plc.encode import (
 from plc.options import PlcOptions, backoff_delays, parse_endpoint
 from plc.registers import BLOCK_WORDS, FIELDS, REGISTER_MAP
 from tracker.errors import BadInput
+from tracker.health import FAULT_RECORDING, Health
 from tracker.poses import TrackedObject
-from tracker.runner import FAULT_RECORDING, Health
 
 ABCD, CDAB = WordOrder.ABCD, WordOrder.CDAB
 CONTRACT = Path(__file__).resolve().parents[2] / "shared" / "CONTRACT.md"

@@ -29,8 +29,8 @@ from plc.options import PlcOptions
 from plc.sim import PlcSimulator
 from plc.writer import PlcWriter
 from tracker.cli import main
+from tracker.health import Health
 from tracker.poses import FrameResult, TrackedObject
-from tracker.runner import Health
 from tracker.sources import Frame
 
 N = 100

@@ -16,11 +16,12 @@ from mcap.reader import make_reader
 from tracker import calibration as calib_io
 from tracker.cli import main
 from tracker.config import TrackerConfig
+from tracker.health import FAULT_RECORDING, Health
 from tracker.pipeline import Pipeline
 from tracker.recording.replay import first_difference
 from tracker.recording.source import McapSource
 from tracker.recording.writer import Recorder, RunInfo
-from tracker.runner import FAULT_RECORDING, Health, Runner
+from tracker.runner import Runner
 from tracker.sources import ImageSequenceSource
 
 ROOT = Path(__file__).resolve().parent.parent

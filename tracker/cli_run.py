@@ -13,8 +13,9 @@ from pathlib import Path
 from tracker import calibration as calib_io
 from tracker.config import TrackerConfig
 from tracker.errors import BadInput
+from tracker.health import Health
 from tracker.pipeline import Pipeline
-from tracker.runner import Health, PoseSink, Runner, Sink, StatusLine
+from tracker.runner import PoseSink, Runner, Sink, StatusLine
 from tracker.scenes import SyntheticSource, preset
 from tracker.sources import Paced, Prefetch, open_source
 
@@ -56,12 +57,16 @@ def load_config(path: str | None) -> TrackerConfig:
             data = json.load(f)
     except OSError as exc:
         raise BadInput(f"{path}: cannot read the configuration: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise BadInput(f"{path}: not a UTF-8 text file (expected JSON settings)") from None
     except json.JSONDecodeError as exc:
         raise BadInput(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
-    if not isinstance(data, dict):
-        raise BadInput(f"{path}: expected a JSON object of settings")
+    except RecursionError:
+        raise BadInput(f"{path}: JSON nested too deeply (expected sections of settings)") from None
     try:
         return TrackerConfig.from_dict(data)
+    except BadInput as exc:
+        raise BadInput(f"{path}: {exc}") from None
     except TypeError as exc:
         raise BadInput(f"{path}: {exc}") from None
 
@@ -111,8 +116,10 @@ def _record_sink(args: argparse.Namespace, health: Health, source, calibration, 
 
 def run(args: argparse.Namespace) -> int:
     demo = args.source is None
+    # Settings first: a bad file is reported before any camera or file is opened.
+    given_config = load_config(args.config) if args.config else None
     source, calibration, recorded_config = open_inputs(args)
-    config = load_config(args.config) if args.config else (recorded_config or TrackerConfig())
+    config = given_config or recorded_config or TrackerConfig()
     health = Health()
     sinks: list[Sink] = []
     stop = threading.Event()

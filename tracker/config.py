@@ -6,6 +6,7 @@ same pipeline with ``TrackerConfig.from_dict``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field, fields
 
 from tracker.errors import BadInput
@@ -92,19 +93,51 @@ class TrackerConfig:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, data: dict) -> TrackerConfig:
-        def build(kind, values):
-            known = {f.name for f in fields(kind)}
-            unknown = set(values) - known
-            if unknown:
-                raise BadInput(f"{kind.__name__}: unknown settings {sorted(unknown)}")
-            return kind(**values)
+    def from_dict(cls, data: object) -> TrackerConfig:
+        """Settings from parsed JSON; every value type-checked, so a bad file is one clear line."""
+        if not isinstance(data, dict):
+            raise BadInput(f"settings: expected a JSON object, got {type(data).__name__}")
+        sections = {f.name: f for f in fields(cls)}
+        unknown = set(data) - set(sections)
+        if unknown:
+            raise BadInput(f"settings: unknown sections {sorted(unknown)}; expected some of {sorted(sections)}")
+        built = {}
+        for name, f in sections.items():
+            values = data.get(name, {})
+            if not isinstance(values, dict):
+                raise BadInput(f"{name}: expected an object of settings, got {type(values).__name__}")
+            built[name] = _build(f.default_factory, name, values)
+        return cls(**built)
 
-        return cls(
-            segment=build(SegmentConfig, data.get("segment", {})),
-            measure=build(MeasureConfig, data.get("measure", {})),
-            track=build(TrackConfig, data.get("track", {})),
-        )
+
+def _build(kind: type, section: str, values: dict) -> object:
+    defaults = kind()
+    known = {f.name for f in fields(kind)}
+    unknown = set(values) - known
+    if unknown:
+        raise BadInput(f"{section}: unknown settings {sorted(unknown)}; expected some of {sorted(known)}")
+    for name, value in values.items():
+        _check_type(f"{section}.{name}", value, getattr(defaults, name))
+    return kind(**values)
+
+
+def _check_type(name: str, value: object, default: object) -> None:
+    """A setting must have its default's type: JSON's true is not 1, 2.5 is not an int, NaN is no number."""
+    if isinstance(default, bool):
+        ok, expected = isinstance(value, bool), "true or false"
+    elif isinstance(default, int):
+        ok, expected = isinstance(value, int) and not isinstance(value, bool), "an integer"
+    elif isinstance(default, float):
+        ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+        expected = "a finite number"
+    elif isinstance(default, str):
+        ok, expected = isinstance(value, str), "a string"
+    elif isinstance(default, tuple | list):
+        ok, expected = isinstance(value, list | tuple), "a list"
+    else:
+        return
+    if not ok:
+        raise BadInput(f"{name}: expected {expected}, got {value!r}")
 
 
 def _positive(obj: object, *names: str) -> None:

@@ -16,35 +16,16 @@ from typing import Protocol, TextIO
 import numpy as np
 
 from tracker.errors import FrameSizeError, SourceLost, TrackerError
+from tracker.health import FAULT_CAMERA_LOST, FAULT_FRAME_SIZE, FAULT_OVERRUN, Health
 from tracker.pipeline import Pipeline
 from tracker.poses import FrameResult, PoseWriter
 from tracker.sources import Frame, FrameSource
 
 log = logging.getLogger(__name__)
 
-# Fault codes of the PLC's fault word (contract section 4).
-FAULT_NONE, FAULT_CAMERA_LOST, FAULT_FRAME_SIZE, FAULT_RECORDING, FAULT_OVERRUN = range(5)
 STATUS_PERIOD_S = 0.25
 # Loop times kept for percentiles (a ring: memory stays flat over any run length).
 _LOOP_WINDOW = 4096
-
-
-@dataclass
-class Health:
-    """What the status word and the status line report; written by the loop and the sinks."""
-
-    running: bool = True
-    camera_ok: bool = True
-    calibration_loaded: bool = True
-    part_tracked: bool = False
-    recording_ok: bool = True
-    fault: int = FAULT_NONE
-    overruns: int = 0
-
-    def set_fault(self, code: int) -> None:
-        # The most serious (lowest non-zero) fault wins.
-        if self.fault == FAULT_NONE or code < self.fault:
-            self.fault = code
 
 
 class Sink(Protocol):

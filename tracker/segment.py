@@ -17,6 +17,8 @@ from tracker.config import SegmentConfig
 # threshold must not leak into the reference. Two dilations reach 2 * (7 // 2) rows.
 _GUARD_PX = 7
 _GUARD_REACH = 2 * (_GUARD_PX // 2)
+# Pixels around a parked blob compared with it to tell a ghost from a parked part.
+_GHOST_RING_PX = _GUARD_PX
 
 
 class Segmenter:
@@ -77,26 +79,43 @@ class Segmenter:
 
     def _absorb_parked(self, frame: np.ndarray, fg: np.ndarray) -> None:
         """A foreground blob with no motion anywhere in it is a parked part or a ghost (what
-        the reference held when a part left): count how long; past the limit it is belt."""
+        the reference held when a part left): count how long; past the limit it is belt.
+        A ghost is recognised at once and joins the belt without waiting."""
         cfg = self.config
-        parked = self._parked(fg, cv2.dilate(self._moving(frame, self._prev), self._guard))
+        parked, ghosts = self._parked(frame, fg, cv2.dilate(self._moving(frame, self._prev), self._guard))
         # (OpenCV ops with a mask and no dst zero what the mask leaves out.)
         still = cv2.add(self._still_steps, 1, mask=parked)
         limit = -(-cfg.absorb_after_frames // cfg.background_every)  # learning steps, rounded up
-        absorb = cv2.compare(still, limit, cv2.CMP_GE)
+        absorb = cv2.bitwise_or(cv2.compare(still, limit, cv2.CMP_GE), ghosts)
         if cv2.countNonZero(absorb):
             cv2.copyTo(frame.astype(np.float32), absorb, self.reference)
             self.background = cv2.convertScaleAbs(self.reference)
             still = cv2.bitwise_and(still, still, mask=cv2.bitwise_not(absorb))
         self._still_steps = still
 
-    @staticmethod
-    def _parked(fg: np.ndarray, moving: np.ndarray) -> np.ndarray:
-        """Mask of the foreground blobs that have no moving pixel."""
+    def _parked(self, frame: np.ndarray, fg: np.ndarray, moving: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Masks of the foreground blobs that have no moving pixel, and of those among them that
+        are ghosts: the reference inside differs from the belt around it, while the frame inside
+        looks like that belt (a part that was in view when the reference was taken, now gone)."""
         parked = np.zeros_like(fg)
+        ghosts = np.zeros_like(fg)
         contours, _ = cv2.findContours(fg, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        h, w = fg.shape
+        m = _GHOST_RING_PX
         for contour in contours:
-            x, y, w, h = cv2.boundingRect(contour)
-            if not cv2.countNonZero(moving[y : y + h, x : x + w]):
-                cv2.drawContours(parked, [contour], -1, 255, thickness=cv2.FILLED)
-        return parked
+            x, y, bw, bh = cv2.boundingRect(contour)
+            if cv2.countNonZero(moving[y : y + bh, x : x + bw]):
+                continue
+            cv2.drawContours(parked, [contour], -1, 255, thickness=cv2.FILLED)
+            x0, y0, x1, y1 = max(0, x - m), max(0, y - m), min(w, x + bw + m), min(h, y + bh + m)
+            blob = np.zeros((y1 - y0, x1 - x0), np.uint8)
+            cv2.drawContours(blob, [contour], -1, 255, thickness=cv2.FILLED, offset=(-x0, -y0))
+            ring = cv2.bitwise_xor(cv2.dilate(blob, self._guard), blob)
+            ref, img = self.background[y0:y1, x0:x1], frame[y0:y1, x0:x1]
+            if not cv2.countNonZero(ring):
+                continue
+            belt = cv2.mean(ref, mask=ring)[0]
+            if (abs(cv2.mean(ref, mask=blob)[0] - belt) > self.config.diff_threshold
+                    and abs(cv2.mean(img, mask=blob)[0] - belt) < self.config.diff_threshold / 2):
+                ghosts[y0:y1, x0:x1] |= blob
+        return parked, ghosts

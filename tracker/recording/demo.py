@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 from tracker.config import TrackerConfig
+from tracker.health import Health
 from tracker.pipeline import Pipeline
 from tracker.recording.writer import Recorder, RecorderConfig, RunInfo
-from tracker.runner import Health, Runner, RunSummary
+from tracker.runner import Runner, RunSummary
 from tracker.scenes import SyntheticSource
 from tracker.synthetic import SceneSpec
 

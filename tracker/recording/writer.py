@@ -29,10 +29,10 @@ from tracker import calibration as calib_io
 from tracker.calibration import Calibration
 from tracker.config import TrackerConfig
 from tracker.errors import BadInput, RecordingError
+from tracker.health import FAULT_RECORDING, Health
 from tracker.poses import FrameResult
 from tracker.recording import schemas
 from tracker.recording.mcapio import COMPRESSIONS, Compression, McapWriter, OpenChunk, Output, RawFile
-from tracker.runner import FAULT_RECORDING, Health
 from tracker.sources import Frame
 
 log = logging.getLogger(__name__)
