@@ -31,6 +31,14 @@ class TrackedObject:
     measured: bool
     # The raw measurement of this frame before filtering (None when predicted).
     raw: Measurement | None = field(default=None, compare=False)
+    # Height of the top face above the belt that the pose was computed with (contract section 2).
+    height_mm: float = 0.0
+    # False while the tracker's own height estimate is still settling (PLC queue flag bit 1).
+    height_converged: bool = True
+    # False when the part touches or overlaps another, so its pose is not safe to pick (queue flag bit 0).
+    pickable: bool = True
+    # Frames since the part was last measured (0 when measured in this frame).
+    age_frames: int = 0
 
     def to_dict(self) -> dict:
         r = _MM_DECIMALS
@@ -41,7 +49,7 @@ class TrackedObject:
             "length_mm": round(self.length_mm, r), "width_mm": round(self.width_mm, r),
             "corners_mm": [[round(float(x), r), round(float(y), r)] for x, y in self.corners_mm],
             "vx_mm_s": round(self.vx_mm_s, r), "vy_mm_s": round(self.vy_mm_s, r),
-            "measured": self.measured,
+            "height_mm": round(self.height_mm, r), "measured": self.measured,
         }
 
 
