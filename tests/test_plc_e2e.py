@@ -33,8 +33,8 @@ from plc.writer import PlcWriter
 from tracker.cli import main
 from tracker.cli_synth import write_scene
 from tracker.health import Health
+from tracker.pose_sink import PoseSink
 from tracker.poses import read_poses
-from tracker.runner import PoseSink
 
 FLOATS = ("x_mm", "y_mm", "angle_deg", "vx_mm_s", "vy_mm_s", "length_mm", "width_mm")
 

@@ -187,7 +187,7 @@ def test_full_disk_stops_the_recording_and_tracking_goes_on(recorded, tmp_path, 
     recorder = Recorder(FullDisk(path, 400_000), str(path), RunInfo(source.calibration, source.config, "x", 30.0),
                         health)
     poses = tmp_path / "poses.jsonl"
-    from tracker.runner import PoseSink
+    from tracker.pose_sink import PoseSink
 
     runner = Runner(source, Pipeline(source.calibration, source.config), [recorder, PoseSink(str(poses))], health)
     with pytest.raises(Exception, match="recording stopped: .*No space left on device"):

@@ -14,8 +14,10 @@ from tracker import calibration as calib_io
 from tracker.config import TrackerConfig
 from tracker.errors import BadInput
 from tracker.health import Health
+from tracker.outputs import PublishOnFirstFrame, StagedFile, refuse_clashes
 from tracker.pipeline import Pipeline
-from tracker.runner import PoseSink, Runner, Sink, StatusLine
+from tracker.pose_sink import PoseSink
+from tracker.runner import Runner, Sink, StatusLine
 from tracker.scenes import SyntheticSource, preset
 from tracker.sources import Paced, Prefetch, open_source
 
@@ -102,16 +104,40 @@ def _plc_sink(args: argparse.Namespace, health: Health, demo: bool) -> Sink | No
     return open_plc_sink(args, health, demo)
 
 
-def _record_sink(args: argparse.Namespace, health: Health, source, calibration, config) -> Sink | None:
-    """The MCAP recorder, or None without --record."""
-    if not args.record:
-        return None
+def _record_sink(path: str, health: Health, source, calibration, config, fps: float | None) -> Sink:
+    """The MCAP recorder writing ``path``."""
     from tracker.recording.writer import Recorder, RunInfo  # noqa: PLC0415 - optional edge
 
     scene = getattr(source, "scene", None)  # a synthetic scene knows its frame rate
-    fps = args.fps or getattr(source, "fps", None) or getattr(scene, "fps", None)
+    fps = fps or getattr(source, "fps", None) or getattr(scene, "fps", None)
     info = RunInfo(calibration, config, source.name, fps)
-    return Recorder.open(args.record, info, health, overruns=lambda: source.overruns)
+    return Recorder.open(path, info, health, overruns=lambda: source.overruns)
+
+
+def _open_sinks(args: argparse.Namespace, health: Health, source, calibration, config, demo: bool,
+                staged: list[StagedFile]) -> list[Sink]:
+    """Pose stream, PLC, recorder. Output files are staged (see tracker/outputs.py): they replace
+    an existing file only once the first frame is processed."""
+    refuse_clashes({"--poses": args.poses, "--record": args.record},
+                   {"--source": None if args.source.isdigit() else args.source,
+                    "--calibration": args.calibration, "--config": args.config})
+    sinks: list[Sink] = []
+    try:
+        if args.poses:
+            staged.append(poses := StagedFile("--poses", args.poses, "the pose stream"))
+            sinks.append(PublishOnFirstFrame(PoseSink(poses.path, health, shown_as=args.poses), poses))
+        plc = _plc_sink(args, health, demo)
+        if plc is not None:
+            sinks.append(plc)
+        if args.record:
+            staged.append(record := StagedFile("--record", args.record, "the recording"))
+            sinks.append(PublishOnFirstFrame(
+                _record_sink(record.path, health, source, calibration, config, args.fps), record))
+    except BaseException:
+        for sink in sinks:
+            sink.close()
+        raise
+    return sinks
 
 
 def run(args: argparse.Namespace) -> int:
@@ -121,20 +147,14 @@ def run(args: argparse.Namespace) -> int:
     source, calibration, recorded_config = open_inputs(args)
     config = given_config or recorded_config or TrackerConfig()
     health = Health()
-    sinks: list[Sink] = []
     stop = threading.Event()
+    staged: list[StagedFile] = []
     try:
         pipeline = Pipeline(calibration, config)
-        if args.poses:
-            sinks.append(PoseSink(args.poses))
-        for make in (lambda: _plc_sink(args, health, demo),
-                     lambda: _record_sink(args, health, source, calibration, config)):
-            sink = make()
-            if sink is not None:
-                sinks.append(sink)
+        sinks = _open_sinks(args, health, source, calibration, config, demo, staged)
     except BaseException:
-        for sink in sinks:
-            sink.close()
+        for file in staged:
+            file.discard()
         source.close()
         raise
     status = None if args.quiet else StatusLine(sys.stderr)

@@ -5,11 +5,9 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass, field
-from typing import IO
 
 import numpy as np
 
-from tracker.errors import BadInput
 from tracker.measure import Measurement
 
 # Decimals written to the pose stream: 0.1 um and 1e-4 deg are far below what is measurable.
@@ -72,23 +70,6 @@ class FrameResult:
 
     def to_json_line(self) -> str:
         return json.dumps(self.to_dict(), allow_nan=False, separators=(", ", ": ")) + "\n"
-
-
-class PoseWriter:
-    """Writes the JSON Lines pose stream; buffered, so the loop does not wait per line."""
-
-    def __init__(self, path: str | os.PathLike) -> None:
-        self.path = str(path)
-        try:
-            self._file: IO[str] = open(path, "w", encoding="utf-8", buffering=1 << 16)  # noqa: SIM115
-        except OSError as exc:
-            raise BadInput(f"{path}: cannot write the pose stream: {exc.strerror}") from None
-
-    def write(self, result: FrameResult) -> None:
-        self._file.write(result.to_json_line())
-
-    def close(self) -> None:
-        self._file.close()
 
 
 def read_poses(path: str | os.PathLike) -> list[dict]:

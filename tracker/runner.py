@@ -18,7 +18,7 @@ import numpy as np
 from tracker.errors import FrameSizeError, SourceLost, TrackerError
 from tracker.health import FAULT_CAMERA_LOST, FAULT_FRAME_SIZE, FAULT_OVERRUN, Health
 from tracker.pipeline import Pipeline
-from tracker.poses import FrameResult, PoseWriter
+from tracker.poses import FrameResult
 from tracker.sources import Frame, FrameSource
 
 log = logging.getLogger(__name__)
@@ -34,20 +34,6 @@ class Sink(Protocol):
     def status(self) -> str: ...
 
     def close(self) -> None: ...
-
-
-class PoseSink:
-    def __init__(self, path: str) -> None:
-        self._writer = PoseWriter(path)
-
-    def submit(self, frame: Frame, result: FrameResult) -> None:
-        self._writer.write(result)
-
-    def status(self) -> str:
-        return ""
-
-    def close(self) -> None:
-        self._writer.close()
 
 
 @dataclass
@@ -171,6 +157,12 @@ class Runner:
             health.set_fault(FAULT_CAMERA_LOST)
             raise
         except FrameSizeError:
+            raise
+        except Exception:
+            # Any other end of the run (a damaged file, a bad frame, a bug): the PLC's final
+            # block must not say "no fault" while the poses have stopped coming.
+            health.camera_ok = False
+            health.set_fault(FAULT_CAMERA_LOST)
             raise
         finally:
             health.running = False

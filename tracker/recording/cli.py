@@ -7,6 +7,7 @@ import logging
 import sys
 
 from tracker.errors import BadInput, RecordingError
+from tracker.outputs import refuse_clashes
 from tracker.recording.replay import replay
 
 log = logging.getLogger(__name__)
@@ -31,6 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if not args.tolerance >= 0:
         raise BadInput(f"--tolerance: expected a number >= 0, got {args.tolerance}")
+    refuse_clashes({"--poses": args.poses}, {"REC.mcap": args.recording})
     report = replay(args.recording, args.poses, args.check, args.tolerance, None if args.quiet else sys.stderr)
     end = report.end
     if end.damaged:
