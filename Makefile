@@ -12,6 +12,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
+	@echo "make run: to type 'tracker' yourself, run '. $(VENV)/bin/activate' first (or call $(BIN)/tracker)"
 	$(BIN)/tracker run
 
 test: $(STAMP) lint

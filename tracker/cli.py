@@ -10,6 +10,7 @@ import argparse
 import importlib
 import logging
 import sys
+from typing import NoReturn
 
 from tracker import __version__
 from tracker.errors import TrackerError
@@ -25,8 +26,15 @@ COMMAND_MODULES = (
 )
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors are one line (contract: exit 2 with a one-line reason), with where to look."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="tracker", description="Poses of parts on a conveyor belt from one fixed camera."
     )
     parser.add_argument("--version", action="version", version=f"belt-tracker {__version__}")

@@ -21,17 +21,42 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _read(path: str) -> list[dict]:
+# Fields only a truth file's objects have (the renderer's visibility), never a pose stream's.
+_TRUTH_ONLY = "visible_px"
+
+
+def _read(path: str, what: str, truth: bool) -> list[dict]:
     try:
-        return read_poses(path)
+        frames = read_poses(path)
     except OSError as exc:
         raise BadInput(f"{path}: cannot read: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise BadInput(f"{path}: not a text file; expected {what}") from None
     except json.JSONDecodeError as exc:
-        raise BadInput(f"{path}: line {exc.lineno}: not JSON ({exc.msg})") from None
+        raise BadInput(f"{path}: line {exc.lineno}: not JSON ({exc.msg}); expected {what}") from None
+    for n, frame in enumerate(frames, 1):
+        objects = frame.get("objects") if isinstance(frame, dict) else None
+        if not isinstance(objects, list) or not isinstance(frame.get("frame"), int):
+            raise BadInput(f"{path}: line {n}: expected {what} (a 'frame' number and an 'objects' list)")
+        for obj in objects:
+            if not isinstance(obj, dict) or not {"x_mm", "y_mm", "angle_deg"} <= obj.keys():
+                raise BadInput(f"{path}: line {n}: an object without x_mm, y_mm, angle_deg; expected {what}")
+            if (_TRUTH_ONLY in obj) != truth:
+                other = "a truth file" if not truth else "a pose stream"
+                raise BadInput(f"{path}: line {n}: this is {other}, expected {what} (arguments swapped?)")
+    return frames
 
 
 def run(args: argparse.Namespace) -> int:
-    summary = evaluate(_read(args.poses), _read(args.truth), skip_first=args.skip_first).summary()
+    poses = _read(args.poses, "a pose stream (tracker run --poses)", truth=False)
+    truths = _read(args.truth, "a truth file (truth.jsonl from tracker synth)", truth=True)
+    if not {p["frame"] for p in poses} & {t["frame"] for t in truths}:
+        raise BadInput(f"{args.poses} and {args.truth} have no frame number in common")
+    acc = evaluate(poses, truths, skip_first=args.skip_first)
+    if acc.visible_frames and acc.missed_frames == acc.visible_frames and acc.false_objects:
+        raise BadInput(f"{args.poses}: no reported object is near any true part of {args.truth}: "
+                       "is it the truth of the scene these poses were tracked on?")
+    summary = acc.summary()
     if args.json:
         print(json.dumps(summary))
         return 0

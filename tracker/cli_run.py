@@ -11,6 +11,7 @@ import threading
 from pathlib import Path
 
 from tracker import calibration as calib_io
+from tracker.cli_types import FPS, FRAME_COUNT
 from tracker.config import TrackerConfig
 from tracker.errors import BadInput
 from tracker.health import Health
@@ -42,11 +43,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="client: write into the PLC (default); server: serve the map for the arm to poll")
     p.add_argument("--record", metavar="OUT.mcap", help="record every frame and result to MCAP")
     p.add_argument("--poses", metavar="OUT.jsonl", help="write the pose stream (JSON Lines)")
-    p.add_argument("--fps", type=float, help="frame rate of a file source (default: from the container)")
+    p.add_argument("--fps", type=FPS,
+                   help="the frame rate a file source was captured at, for its timestamps (default: from the "
+                        "container; it does not limit speed: see --realtime)")
     p.add_argument("--realtime", action="store_true",
                    help="play a file or recording at its recorded rate, like a camera (the demo does)")
     p.add_argument("--config", metavar="FILE.json", help="pipeline settings (see tracker/config.py)")
-    p.add_argument("--max-frames", type=int, help="stop after this many frames")
+    p.add_argument("--max-frames", type=FRAME_COUNT, help="stop after this many frames (>= 1)")
     p.add_argument("--quiet", action="store_true", help="no live status line")
     p.set_defaults(func=run)
 

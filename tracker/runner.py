@@ -58,7 +58,10 @@ class RunSummary:
 
 
 class StatusLine:
-    """One live line on a terminal (carriage return), a line per second elsewhere."""
+    """One live line on a terminal (carriage return), a line per second elsewhere.
+
+    While it is shown on a terminal, a log record first clears it, so a log line never lands at
+    the end of the status line; the next status update draws it again below the log line."""
 
     def __init__(self, out: TextIO) -> None:
         self._out = out
@@ -66,6 +69,18 @@ class StatusLine:
         self._period = STATUS_PERIOD_S if self._tty else 1.0
         self._next = 0.0
         self._width = 0
+        if self._tty:
+            for handler in logging.getLogger().handlers:
+                handler.addFilter(self)
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        """A logging filter that lets every record through, after clearing the status line."""
+        if self._width:
+            self._out.write("\r" + " " * self._width + "\r")
+            self._out.flush()
+            self._width = 0
+            self._next = 0.0  # redraw at the next frame
+        return True
 
     def due(self) -> bool:
         """Time for a new line (so the loop builds the text only then)."""
@@ -87,6 +102,9 @@ class StatusLine:
         if self._tty and self._width:
             self._out.write("\n")
             self._out.flush()
+            self._width = 0
+        for handler in logging.getLogger().handlers:
+            handler.removeFilter(self)
 
 
 def describe(result: FrameResult) -> str:
