@@ -68,7 +68,7 @@ def test_frame_size_differs_from_calibration(scene_dir, tmp_path):
         (["--source", "/nonexistent/%05d.png", "--calibration", "CAL"], "no image found"),
         (["--source", "FRAMES", "--calibration", "/nonexistent/c.yaml"], "calibration file not found"),
         (["--source", "FRAMES"], "--calibration is required"),
-        (["--source", "FRAMES", "--calibration", "CAL", "--fps", "-3"], "--fps: expected a positive number"),
+        (["--source", "FRAMES", "--calibration", "CAL", "--fps", "-3"], "--fps: expected a number from 0.01"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(scene_dir, capsys, args, message):

@@ -11,16 +11,16 @@ import threading
 from pathlib import Path
 
 from tracker import calibration as calib_io
-from tracker.cli_types import FPS, FRAME_COUNT
+from tracker.cli_types import CAMERA_INDEX_MAX, FPS, FRAME_COUNT
 from tracker.config import TrackerConfig
-from tracker.errors import BadInput
+from tracker.errors import BadInput, SourceError
 from tracker.health import Health
 from tracker.outputs import PublishOnFirstFrame, StagedFile, refuse_clashes
 from tracker.pipeline import Pipeline
 from tracker.pose_sink import PoseSink
 from tracker.runner import Runner, Sink, StatusLine
 from tracker.scenes import SyntheticSource, preset
-from tracker.sources import Paced, Prefetch, open_source
+from tracker.sources import CameraSource, FrameSource, ImageSequenceSource, Paced, Prefetch, VideoFileSource
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +74,25 @@ def load_config(path: str | None) -> TrackerConfig:
         raise BadInput(f"{path}: {exc}") from None
     except TypeError as exc:
         raise BadInput(f"{path}: {exc}") from None
+
+
+def open_source(spec: str, fps: float | None = None) -> FrameSource:
+    """Camera index, video file, printf image pattern or ``.mcap`` recording. The choice is made here,
+    where the run is built, so that tracker.sources never imports the recording package."""
+    if fps is not None and not fps > 0:
+        raise SourceError(f"--fps: expected a positive number, got {fps}")
+    if spec.isdigit():
+        if int(spec) > CAMERA_INDEX_MAX:
+            raise SourceError(f"--source {spec}: expected a camera index from 0 to {CAMERA_INDEX_MAX}, "
+                              "a video file, an image pattern or a .mcap recording")
+        return CameraSource(int(spec), fps)
+    if spec.lower().endswith(".mcap"):
+        from tracker.recording.source import McapSource  # noqa: PLC0415 - only for recordings
+
+        return McapSource(spec, fps)
+    if "%" in spec:
+        return ImageSequenceSource(spec, fps)
+    return VideoFileSource(spec, fps)
 
 
 def open_inputs(args: argparse.Namespace):

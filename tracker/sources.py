@@ -20,7 +20,6 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from tracker.cli_types import CAMERA_INDEX_MAX
 from tracker.errors import SourceError, SourceLost
 
 log = logging.getLogger(__name__)
@@ -278,21 +277,3 @@ class Paced(FrameSource):
     def close(self) -> None:
         self._stop.set()
         self.source.close()
-
-
-def open_source(spec: str, fps: float | None = None) -> FrameSource:
-    """Camera index, video file, printf image pattern or ``.mcap`` recording."""
-    if fps is not None and not fps > 0:
-        raise SourceError(f"--fps: expected a positive number, got {fps}")
-    if spec.isdigit():
-        if int(spec) > CAMERA_INDEX_MAX:
-            raise SourceError(f"--source {spec}: expected a camera index from 0 to {CAMERA_INDEX_MAX}, "
-                              "a video file, an image pattern or a .mcap recording")
-        return CameraSource(int(spec), fps)
-    if spec.lower().endswith(".mcap"):
-        from tracker.recording.source import McapSource  # noqa: PLC0415 - optional edge
-
-        return McapSource(spec, fps)
-    if "%" in spec:
-        return ImageSequenceSource(spec, fps)
-    return VideoFileSource(spec, fps)
