@@ -1,5 +1,6 @@
 """Recording every frame to MCAP, replaying it bit-exactly, and surviving kills and full disks."""
 
+import dataclasses
 import errno
 import json
 import os
@@ -110,7 +111,7 @@ def test_check_names_the_first_differing_frame_and_field(recorded, tmp_path, cap
         if result.objects and changed is None:
             changed = frame.index
             obj = result.objects[0]
-            result = type(result)(result.frame, result.t_ns, (type(obj)(**{**obj.__dict__, "y_mm": obj.y_mm + 0.5}),))
+            result = dataclasses.replace(result, objects=(dataclasses.replace(obj, y_mm=obj.y_mm + 0.5),))
         recorder.submit(frame, result)
     recorder.close()
     assert main(["replay", str(tampered), "--check"]) == 1

@@ -6,6 +6,7 @@ same pipeline with ``TrackerConfig.from_dict``.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import asdict, dataclass, field, fields
 
@@ -27,10 +28,50 @@ class SegmentConfig:
     absorb_after_frames: int = 90
     # Side of the square opening kernel that removes noise speckles from the mask.
     open_kernel_px: int = 3
+    # Side of the square closing kernel that joins the pieces of one part (a phone's dark screen
+    # in its light frame differs from the belt in both directions; between, the blur may not).
+    # Parts closer than this are one blob.
+    close_kernel_px: int = 9
+    # Box blur (px, odd) applied to differences before thresholding: a belt's fine texture
+    # (knurl, weave, mottling) moves with the belt and must average out; parts, far larger than
+    # its period, keep their level. 1 turns it off; 0 (auto) uses texture_blur_auto_px when the
+    # first frame's belt has fine texture (its high-pass spread exceeds texture_spread), else 1.
+    texture_blur_px: int = 0
+    texture_blur_auto_px: int = 9
+    texture_spread: float = 4.0
+    # Belt motion is measured on the region of interest reduced by this factor (phase correlation).
+    motion_reduce: int = 4
+    # Below this shift (px per frame) the belt is standing: nothing is absorbed into the
+    # reference, so parts that stop with the belt stay parts.
+    belt_still_px: float = 0.3
+    # The region of interest: an image polygon [[x, y], ...] in pixels, or a belt polygon in mm
+    # (one or neither; none: the whole image). Outside it nothing is a part.
+    roi_px: tuple = ()
+    roi_mm: tuple = ()
+    # Foreground covering more than this fraction of the region is a scene the tracker does not
+    # understand (light switched on, camera bumped): fault 5, nothing measured...
+    scene_fault_fraction: float = 0.5
+    # ...and after this many such frames in a row the reference is learnt anew from the frame.
+    relearn_after_frames: int = 30
 
     def __post_init__(self) -> None:
         _positive(self, "diff_threshold", "motion_threshold", "background_every",
-                  "absorb_after_frames", "open_kernel_px")
+                  "absorb_after_frames", "open_kernel_px", "close_kernel_px", "texture_blur_auto_px",
+                  "texture_spread", "motion_reduce", "belt_still_px", "scene_fault_fraction", "relearn_after_frames")
+        for name in ("texture_blur_px", "texture_blur_auto_px"):
+            value = getattr(self, name)
+            if value < 0 or (value and value % 2 == 0):
+                raise BadInput(f"segment.{name}: expected an odd number of pixels (or 0: auto), got {value}")
+        for name in ("roi_px", "roi_mm"):
+            # JSON gives lists; keep the frozen configuration hashable.
+            value = getattr(self, name)
+            if not all(isinstance(p, list | tuple) and len(p) == 2 for p in value):
+                raise BadInput(f"segment.{name}: expected a list of [x, y] points, got {value!r}")
+            try:
+                points = tuple(tuple(float(c) for c in p) for p in value)
+            except (TypeError, ValueError):
+                raise BadInput(f"segment.{name}: expected numbers as coordinates, got {value!r}") from None
+            object.__setattr__(self, name, points)
         if self.absorb_after_frames > 255 * self.background_every:
             raise BadInput(f"absorb_after_frames: expected <= 255 * background_every "
                            f"({255 * self.background_every}), got {self.absorb_after_frames}")
@@ -54,9 +95,12 @@ class MeasureConfig:
     side_band_px: float = 1.5
     # Minimum |part - belt| contrast (grey levels) for a sub-pixel measurement.
     min_contrast: float = 20.0
+    # At most this many blobs (the largest) are measured per frame: clutter cannot make the
+    # loop fall behind the camera.
+    max_blobs: int = 24
 
     def __post_init__(self) -> None:
-        _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast")
+        _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "max_blobs")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
 
@@ -90,7 +134,8 @@ class TrackerConfig:
     track: TrackConfig = field(default_factory=TrackConfig)
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """Plain JSON types (lists, not tuples), so a recorded copy compares equal."""
+        return json.loads(json.dumps(asdict(self)))
 
     @classmethod
     def from_dict(cls, data: object) -> TrackerConfig:

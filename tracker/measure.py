@@ -18,10 +18,12 @@ import numpy as np
 
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
+from tracker.segment.roi import RegionOfInterest
 from tracker.undistort import BeltMapper
 
-# Pixels on each side of a crossing that the coverage sum spans (covers blur up to ~4 px).
-_HALF_WINDOW = 3
+# Pixels on each side of a crossing that the coverage sum spans (covers blur up to ~4 px); the
+# segmenter's texture blur may move a mask's edge by up to half its size, which widens it.
+HALF_WINDOW_PX = 3
 # A row crossing is used where |d/dx| >= this * |d/dy| (edge within ~63 deg of vertical).
 _STEEP_RATIO = 0.5
 _ERODE = cv2.getStructuringElement(cv2.MORPH_RECT, (5, 5))
@@ -42,9 +44,12 @@ class Measurement:
 
 
 class Measurer:
-    def __init__(self, mapper: BeltMapper, config: MeasureConfig) -> None:
+    def __init__(self, mapper: BeltMapper, config: MeasureConfig, roi: RegionOfInterest | None = None) -> None:
         self.mapper = mapper
         self.config = config
+        self._roi = roi
+        # Half the width of the window each sub-pixel edge is summed over (see HALF_WINDOW_PX).
+        self.half_window_px = HALF_WINDOW_PX
         self._width, self._height = mapper.calibration.size
         # Conservative pixel-area pre-filter, so tiny specks are never mapped at all.
         self._min_area_px = 0.5 * config.min_area_mm2 / mapper.max_mm_per_px() ** 2
@@ -53,10 +58,12 @@ class Measurer:
     def __call__(self, frame: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> list[Measurement]:
         """Measure every blob of ``mask``; ``reference`` is the empty belt (float32 or uint8)."""
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        # Cheap rejection first, then only the largest blobs: clutter cannot stall the loop.
+        sized = [(area, c) for c in contours if (area := cv2.contourArea(c)) >= self._min_area_px]
+        if len(sized) > self.config.max_blobs:
+            sized = sorted(sized, key=lambda ac: -ac[0])[: self.config.max_blobs]
         found = []
-        for contour in contours:
-            if cv2.contourArea(contour) < self._min_area_px:
-                continue
+        for _, contour in sized:
             m = self._measure(frame, reference, contour)
             if m is not None:
                 found.append(m)
@@ -69,6 +76,7 @@ class Measurer:
         x, y, w, h = cv2.boundingRect(contour)
         b = cfg.border_margin_px
         clipped = x < b or y < b or x + w > self._width - b or y + h > self._height - b
+        clipped = clipped or (self._roi is not None and self._roi.touches_edge(contour))
         # The hull in pixels maps to the hull on the belt closely enough for the area test
         # (and costs a tenth of mapping the whole outline).
         hull_mm = self.mapper.to_mm(cv2.convexHull(contour).reshape(-1, 2))
@@ -109,8 +117,9 @@ class Measurer:
         # not (shading), so the contrast is taken per pixel against the local reference.
         part_level = _median_u8(img8, inner)
         inside = blob > 0
-        rows = _boundary_crossings(img8, belt_level, part_level, inside, cfg.min_contrast)
-        cols = _boundary_crossings(img8.T, belt_level.T, part_level, inside.T, cfg.min_contrast)
+        k = self.half_window_px
+        rows = _boundary_crossings(img8, belt_level, part_level, inside, cfg.min_contrast, k)
+        cols = _boundary_crossings(img8.T, belt_level.T, part_level, inside.T, cfg.min_contrast, k)
         if rows is None or cols is None:
             return None
         points = np.concatenate([rows, cols[:, ::-1]])
@@ -131,15 +140,15 @@ def _median_u8(image: np.ndarray, mask: np.ndarray) -> float:
 
 
 def _boundary_crossings(img8: np.ndarray, belt: np.ndarray, part_level: float, inside: np.ndarray,
-                        min_contrast: float) -> np.ndarray | None:
+                        min_contrast: float, half_window: int) -> np.ndarray | None:
     """Sub-pixel edge positions where each row crosses the blob's outer boundary: Nx2 (col, row).
 
     The window of each crossing starts at the blob's first (last) pixel of the row and
-    reaches ``_HALF_WINDOW`` pixels to either side. Only rows where the boundary is within
+    reaches ``half_window`` pixels to either side. Only rows where the boundary is within
     ~63 deg of vertical are used (the window then holds the whole transition); the
     transposed call takes the other edges. None when the contrast is too low to trust.
     """
-    k = _HALF_WINDOW
+    k = half_window
     n_rows, n_cols = inside.shape
     has = inside.any(axis=1)
     left = np.argmax(inside, axis=1)

@@ -77,6 +77,12 @@ class Tracker:
         self.tracks: list[Track] = []
         self._next_id = 1
 
+    def hold(self, t_ns: int) -> None:
+        """The parts did not move since the last step (a repeated frame, a scene not understood):
+        advance the tracks' clocks without moving them, so the next step predicts one frame ahead."""
+        for track in self.tracks:
+            track.t_ns = max(track.t_ns, t_ns)
+
     def step(self, measurements: list[Measurement], t_ns: int) -> tuple[TrackedObject, ...]:
         cfg = self.config
         for track in self.tracks:

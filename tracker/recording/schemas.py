@@ -198,7 +198,8 @@ def encode_track(result: FrameResult, obj: TrackedObject) -> bytes:
 def pose_line_of(recorded: dict) -> dict:
     """The pose-stream dict logged live, from a recorded poses message (raw fields removed)."""
     objects = [{k: v for k, v in o.items() if k != "raw"} for o in recorded.get("objects", [])]
-    return {"frame": recorded["frame"], "t": recorded["t"], "objects": objects}
+    # Every other field of the line as it was logged (e.g. the belt's motion), in its order.
+    return {k: (objects if k == "objects" else v) for k, v in recorded.items() if k != "measurements"}
 
 
 @dataclass(frozen=True)
