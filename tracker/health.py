@@ -44,3 +44,8 @@ class Health:
         # The most serious (lowest non-zero) fault wins.
         if self.fault == FAULT_NONE or code < self.fault:
             self.fault = code
+
+    def clear_fault(self, code: int) -> None:
+        """A condition that passes (a scene understood again) clears its own fault, no other."""
+        if self.fault == code:
+            self.fault = FAULT_NONE

@@ -16,7 +16,7 @@ from typing import Protocol, TextIO
 import numpy as np
 
 from tracker.errors import FrameSizeError, SourceLost, TrackerError
-from tracker.health import FAULT_CAMERA_LOST, FAULT_FRAME_SIZE, FAULT_OVERRUN, Health
+from tracker.health import FAULT_CAMERA_LOST, FAULT_FRAME_SIZE, FAULT_OVERRUN, FAULT_SCENE, Health
 from tracker.pipeline import Pipeline
 from tracker.poses import FrameResult
 from tracker.sources import Frame, FrameSource
@@ -143,6 +143,13 @@ class Runner:
                 t0 = time.perf_counter_ns()
                 result = self.pipeline.process(frame.index, frame.image, frame.t_ns)
                 health.part_tracked = bool(result.objects)
+                if result.scene_fault:
+                    if health.fault != FAULT_SCENE:
+                        log.warning("scene not understood: foreground covers most of the region of interest "
+                                    "(lighting changed? camera moved?); nothing measured (fault %d)", FAULT_SCENE)
+                    health.set_fault(FAULT_SCENE)
+                else:
+                    health.clear_fault(FAULT_SCENE)
                 health.overruns = self.source.overruns
                 if self.source.overruns:
                     health.set_fault(FAULT_OVERRUN)
@@ -159,7 +166,10 @@ class Runner:
                     fps, fps_t, fps_n = fps_n / (now - fps_t), now, 0
                 if self.status and self.status.due():
                     parts = [f"frame {frame.index}", f"{fps:.0f} fps", f"loop {this_loop_ns / 1e6:.2f} ms",
-                             f"objects {len(result.objects)}", describe(result)]
+                             f"belt {result.belt.speed_mm_s:.0f} mm/s", f"objects {len(result.objects)}",
+                             describe(result)]
+                    if result.scene_fault:
+                        parts.append("SCENE NOT UNDERSTOOD")
                     parts += [s for s in (sink.status() for sink in self.sinks) if s]
                     if self.source.overruns:
                         parts.append(f"overruns {self.source.overruns}")
