@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
 
 from tracker import calibration as calib_io
 from tracker.cli import main
@@ -66,30 +67,45 @@ def test_frames_come_back_bit_exact_with_their_capture_times(recorded, scene_dir
     assert source.config == TrackerConfig()
 
 
-def test_recording_opens_with_the_mcap_reader_as_foxglove_types(recorded):
+def test_recording_opens_with_the_mcap_reader_as_foxglove_types(recorded, scene_dir):
+    """The official reader, with the official protobuf decoder built from the schemas in the file
+    alone, reads Foxglove's binary types; our own types are JSON."""
     rec, live = recorded
     with open(rec, "rb") as f:
-        reader = make_reader(f)
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
         summary = reader.get_summary()
-        names = {s.name for s in summary.schemas.values()}
-        assert {"foxglove.RawImage", "foxglove.ImageAnnotations"} <= names
-        assert {s.encoding for s in summary.schemas.values()} == {"jsonschema"}
+        encodings = {s.name: s.encoding for s in summary.schemas.values()}
+        assert encodings == {"foxglove.RawImage": "protobuf", "foxglove.ImageAnnotations": "protobuf",
+                             "tracker.FramePoses": "jsonschema", "tracker.TrackPoint": "jsonschema"}
         n_live = len(live.read_text().splitlines())
         by_topic = {}
-        for schema, channel, message in reader.iter_messages():
-            by_topic.setdefault(channel.topic, []).append((schema.name, message))
+        for schema, channel, message, decoded in reader.iter_decoded_messages(
+                topics=["/camera/image", "/tracker/annotations"]):
+            by_topic.setdefault(channel.topic, []).append((schema.name, message, decoded))
+        tracks = [m for _, c, m in reader.iter_messages(topics=["/tracker/track"])]
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
         attachments = {a.name: a for a in reader.iter_attachments()}
-    images = [m for s, m in by_topic["/camera/image"] if s == "foxglove.RawImage"]
-    assert len(images) == n_live
-    first = json.loads(images[0].data)
-    assert first["encoding"] == "mono8" and first["step"] == first["width"]
-    assert images[0].log_time == 0 and images[1].log_time == round(1e9 / 30)
-    annotations = [json.loads(m.data) for s, m in by_topic["/tracker/annotations"]]
-    assert len(annotations) == n_live and any(a["points"] for a in annotations)
+    images = by_topic["/camera/image"]
+    assert len(images) == n_live and all(s == "foxglove.RawImage" for s, _, _ in images)
+    first = images[0][2]
+    assert first.encoding == "mono8" and first.step == first.width and first.frame_id == "camera"
+    # The pixels are the frame's own, and the stamps its capture time.
+    original = ImageSequenceSource(str(scene_dir / "frames" / "%05d.png"), fps=30.0)
+    frame1 = list(zip(range(2), original, strict=False))[1][1]
+    pixels = np.frombuffer(images[1][2].data, np.uint8).reshape(images[1][2].height, images[1][2].width)
+    assert np.array_equal(pixels, frame1.image)
+    assert images[1][2].timestamp.ToNanoseconds() == images[1][1].log_time == round(1e9 / 30)
+    assert images[0][1].log_time == 0
+    assert [m.sequence for _, m, _ in images] == list(range(n_live))
+    annotations = [d for _, _, d in by_topic["/tracker/annotations"]]
+    assert len(annotations) == n_live and any(a.points for a in annotations)
     # A part's rectangle is a closed polygon of 4 image points, beside its centroid and id.
-    drawn = next(a for a in annotations if a["points"])
-    assert any(len(p["points"]) == 4 for p in drawn["points"]) and drawn["texts"]
+    drawn = next(a for a in annotations if a.points)
+    assert any(len(p.points) == 4 and p.type == p.LINE_LOOP for p in drawn.points) and drawn.texts
+    assert drawn.texts[0].text.startswith("#")
+    # One message per tracked object per frame, each with its own sequence number on its channel.
+    assert tracks and len({m.sequence for m in tracks}) == len(tracks)
+    assert {"frame", "id", "x_mm"} <= set(json.loads(tracks[0].data))
     # Settings, version and calibration travel with the file.
     run = metadata["tracker.run"]
     assert json.loads(run["config"]) == TrackerConfig().to_dict() and run["version"]

@@ -14,7 +14,10 @@ written by ``finish`` make the file seekable (Foxglove, ``mcap`` readers).
 from __future__ import annotations
 
 import errno
+import io
+import mmap
 import os
+import struct
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -22,7 +25,7 @@ from typing import Any, BinaryIO, Protocol
 
 import lz4.frame
 import zstandard
-from mcap.data_stream import RecordBuilder
+from mcap.data_stream import ReadDataStream, RecordBuilder
 from mcap.exceptions import EndOfFile, McapError
 from mcap.records import (
     Attachment,
@@ -41,7 +44,7 @@ from mcap.records import (
     Statistics,
     SummaryOffset,
 )
-from mcap.stream_reader import StreamReader
+from mcap.stream_reader import StreamReader, breakup_chunk
 
 from tracker import __version__
 
@@ -49,7 +52,7 @@ MAGIC = bytes((0x89, ord("M"), ord("C"), ord("A"), ord("P"), ord("0"), 0x0D, 0x0
 LIBRARY = f"belt-tracker/{__version__}"
 COMPRESSIONS = ("zstd", "lz4", "none")
 # MCAP opcodes of the summary groups (spec), for the summary offsets.
-_OP_SCHEMA, _OP_CHANNEL, _OP_CHUNK_INDEX = 0x03, 0x04, 0x08
+_OP_SCHEMA, _OP_CHANNEL, _OP_CHUNK, _OP_CHUNK_INDEX = 0x03, 0x04, 0x06, 0x08
 _OP_ATTACHMENT_INDEX, _OP_STATISTICS, _OP_METADATA_INDEX = 0x0A, 0x0B, 0x0D
 
 
@@ -287,10 +290,10 @@ class _Exact:
 class ReadEnd:
     """How a sequential read ended."""
 
-    complete: bool = False  # the footer and closing magic were read
+    complete: bool = False  # the footer and the whole closing magic were read
     truncated: bool = False  # the file ends inside (or instead of) a record
-    damaged: str = ""  # a record could not be decoded (CRC, compression, format)
-    position: int = 0  # bytes read
+    damaged: str = ""  # a record could not be decoded (CRC, compression, format, a length past the end)
+    position: int = 0  # bytes read; where the damage is, when damaged
 
     def describe(self, path: str) -> str:
         if self.complete:
@@ -302,17 +305,81 @@ class ReadEnd:
 
 def iter_records(f: BinaryIO, end: ReadEnd, emit_chunks: bool = False) -> Iterator[Any]:
     """Every record of an MCAP stream in file order (messages taken out of their chunks,
-    CRC-checked); stops quietly at a truncation or damage and says which in ``end``."""
+    CRC-checked); stops quietly at a truncation or damage and says which in ``end``.
+
+    A record whose length points past the end of the file looks like a file cut short. It is
+    damage when valid data follows (a chunk whose CRC checks, or the closing footer): a cut
+    file has nothing after its last record."""
     exact = _Exact(f)
     reader = StreamReader(exact, emit_chunks=emit_chunks, validate_crcs=True)
+    good = 0  # where the record being read begins: the end of the last one read whole
+    footer = False
     try:
         for record in reader.records:
+            good = exact.position
+            end.position = good
             yield record
             if isinstance(record, Footer):
-                end.complete = True
-    except EndOfFile:
-        end.truncated = not end.complete
-    except (McapError, ValueError, zstandard.ZstdError, RuntimeError, UnicodeDecodeError, KeyError) as exc:
-        end.damaged = str(exc) or type(exc).__name__
-    finally:
+                footer = True
+        # The stream reader returns only after the closing magic: a file cut inside it is not complete.
+        end.complete = footer
+        end.truncated = not footer
         end.position = exact.position
+    except EndOfFile:
+        following = valid_data_after(f, good) if good else None
+        if following is None:
+            end.truncated = True
+            end.position = exact.position
+        else:
+            end.damaged = (f"the record there cannot be read (its length or type is wrong), yet valid data "
+                           f"follows at byte {following}")
+            end.position = good
+    except (McapError, ValueError, zstandard.ZstdError, RuntimeError, UnicodeDecodeError, KeyError,
+            struct.error) as exc:
+        end.damaged = str(exc) or type(exc).__name__
+        end.position = good
+
+
+# A chunk record up to its compression name: opcode, length, start and end time,
+# uncompressed size and CRC, then the name's length (MCAP spec).
+_CHUNK_HEAD = 1 + 8 + 8 + 8 + 8 + 4
+_FOOTER_RECORD = 1 + 8 + 20
+# Candidate chunks checked when looking for valid data behind damage (each is decompressed).
+_MAX_CANDIDATES = 64
+
+
+def valid_data_after(f: BinaryIO, start: int) -> int | None:
+    """The offset of the closing footer or of a valid chunk after ``start``, else None."""
+    try:
+        size = os.fstat(f.fileno()).st_size
+    except (OSError, AttributeError, ValueError):
+        return None
+    if size <= start + 1:
+        return None
+    with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as m:
+        footer = size - len(MAGIC) - _FOOTER_RECORD
+        if footer > start and m[size - len(MAGIC):] == MAGIC and m[footer] == 0x02 \
+                and int.from_bytes(m[footer + 1:footer + 9], "little") == 20:
+            return footer
+        for name in ("zstd", "lz4"):
+            pattern = len(name).to_bytes(4, "little") + name.encode()
+            found, tries = m.find(pattern, start + 1), 0
+            while found >= 0 and tries < _MAX_CANDIDATES:
+                tries += 1
+                head = found + 4 - _CHUNK_HEAD
+                if head > start and m[head] == _OP_CHUNK and _chunk_ok(m, head, size):
+                    return head
+                found = m.find(pattern, found + 1)
+    return None
+
+
+def _chunk_ok(m: mmap.mmap, head: int, size: int) -> bool:
+    length = int.from_bytes(m[head + 1:head + 9], "little")
+    if head + 9 + length > size:
+        return False
+    try:
+        chunk = Chunk.read(ReadDataStream(io.BytesIO(m[head + 9:head + 9 + length])))
+        breakup_chunk(chunk, validate_crc=True)
+    except Exception:  # noqa: BLE001 - any failure means: not a valid chunk
+        return False
+    return True

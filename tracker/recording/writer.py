@@ -1,7 +1,7 @@
 """The recorder: every frame the pipeline processes, and its result, to an MCAP file.
 
 It runs beside the real-time loop. ``submit`` only puts the frame and its result
-in a bounded queue. An encoder thread turns them into JSON messages and groups
+in a bounded queue. An encoder thread turns them into messages (``schemas``) and groups
 them into chunks of about a second; a disk thread compresses each chunk and
 writes it (compression releases the GIL, so the two overlap). If the disk cannot
 keep up, the full queue holds the loop back rather than dropping a frame: a
@@ -60,10 +60,16 @@ class RecorderConfig:
     compression: str = "zstd"
     zstd_level: int = 1
     zstd_threads: int = 0
+    # Images and annotations as protobuf (a copy per frame); "json" writes the format of
+    # earlier versions (base64 images, 1.2 ms more per 720p frame and a third more bytes).
+    message_encoding: str = "protobuf"
 
     def __post_init__(self) -> None:
         if self.compression not in COMPRESSIONS:
             raise BadInput(f"recorder compression: expected one of {COMPRESSIONS}, got {self.compression!r}")
+        if self.message_encoding not in schemas.ENCODINGS:
+            raise BadInput(f"recorder message_encoding: expected one of {schemas.ENCODINGS}, "
+                           f"got {self.message_encoding!r}")
         for name in ("queue_frames", "chunk_duration_ns", "chunk_max_bytes", "disk_queue_chunks"):
             if getattr(self, name) <= 0:
                 raise BadInput(f"RecorderConfig.{name}: expected > 0, got {getattr(self, name)}")
@@ -88,15 +94,20 @@ class RunInfo:
     config: TrackerConfig
     source_name: str = "?"
     fps: float | None = None
+    # Stamp the start and end with the wall clock, and count the submits the disk held back.
+    # A synthetic recording does neither: the same command then writes the same bytes.
+    wall_clock: bool = True
 
     def metadata(self) -> dict[str, str]:
-        return {
+        meta = {
             "software": "belt-tracker", "version": __version__, "source": self.source_name,
             "fps": "" if self.fps is None else repr(float(self.fps)),
             "image_width": str(self.calibration.image_width), "image_height": str(self.calibration.image_height),
             "config": json.dumps(self.config.to_dict(), sort_keys=True),
-            "started_unix_ns": str(time.time_ns()),
         }
+        if self.wall_clock:
+            meta["started_unix_ns"] = str(time.time_ns())
+        return meta
 
 
 class _Stop:
@@ -109,6 +120,7 @@ class Recorder:
     def __init__(self, out: Output, path: str, info: RunInfo, health: Health | None = None,
                  config: RecorderConfig | None = None, overruns=lambda: 0) -> None:
         self.path = path
+        self.info = info
         self.config = config or RecorderConfig()
         self.health = health or Health()
         self._out = out
@@ -125,8 +137,14 @@ class Recorder:
         self._writer.start()
         self._channels = {}
         for topic, schema_name in schemas.CHANNELS.items():
-            schema_id = self._writer.add_schema(schema_name, "jsonschema", schemas.schema_bytes(schema_name))
-            self._channels[topic] = self._writer.add_channel(topic, "json", schema_id)
+            schema_encoding, data, message_encoding = schemas.channel_schema(schema_name, self.config.message_encoding)
+            schema_id = self._writer.add_schema(schema_name, schema_encoding, data)
+            self._channels[topic] = self._writer.add_channel(topic, message_encoding, schema_id)
+        binary = self.config.message_encoding == "protobuf"
+        self._encode_image = schemas.encode_image_pb if binary else schemas.encode_image
+        self._encode_annotations = self._overlay.encode_pb if binary else self._overlay.encode
+        # /tracker/track carries one message per object: its own sequence, unique on its channel.
+        self._track_sequence = 0
         self._writer.add_metadata(META_RUN, info.metadata())
         self._writer.add_attachment(ATTACH_CALIBRATION, "application/x-yaml", calibration_bytes(info.calibration))
         self._writer.add_attachment(ATTACH_CONFIG, "application/json",
@@ -192,9 +210,10 @@ class Recorder:
         try:
             if not self._failed:
                 try:
-                    self._writer.add_metadata(META_END, {
-                        "frames": str(self.frames_written), "overruns": str(int(self._overruns())),
-                        "held_back": str(self.held_back), "ended_unix_ns": str(time.time_ns())})
+                    end = {"frames": str(self.frames_written), "overruns": str(int(self._overruns()))}
+                    if self.info.wall_clock:
+                        end |= {"held_back": str(self.held_back), "ended_unix_ns": str(time.time_ns())}
+                    self._writer.add_metadata(META_END, end)
                     self._writer.finish()
                 except OSError as exc:
                     self._fail(exc)
@@ -241,12 +260,14 @@ class Recorder:
             self._put_always(self._chunks_out, _Stop)
 
     def _add_frame(self, chunk: OpenChunk, frame: Frame, result: FrameResult) -> None:
+        # The image's sequence is the frame index (a replay reads it back from there).
         ch, t, seq = self._channels, frame.t_ns, frame.index
-        chunk.add(ch[schemas.TOPIC_IMAGE], t, schemas.encode_image(frame.image, t), seq)
+        chunk.add(ch[schemas.TOPIC_IMAGE], t, self._encode_image(frame.image, t), seq)
         chunk.add(ch[schemas.TOPIC_POSES], t, schemas.encode_poses(result), seq)
-        chunk.add(ch[schemas.TOPIC_ANNOTATIONS], t, self._overlay.encode(result), seq)
+        chunk.add(ch[schemas.TOPIC_ANNOTATIONS], t, self._encode_annotations(result), seq)
         for obj in result.objects:
-            chunk.add(ch[schemas.TOPIC_TRACK], t, schemas.encode_track(result, obj), seq)
+            self._track_sequence += 1
+            chunk.add(ch[schemas.TOPIC_TRACK], t, schemas.encode_track(result, obj), self._track_sequence)
 
     def _disk_loop(self) -> None:
         while True:
