@@ -36,7 +36,6 @@ from mcap.records import (
     DataEnd,
     Footer,
     Header,
-    Message,
     MessageIndex,
     Metadata,
     MetadataIndex,
@@ -52,7 +51,7 @@ MAGIC = bytes((0x89, ord("M"), ord("C"), ord("A"), ord("P"), ord("0"), 0x0D, 0x0
 LIBRARY = f"belt-tracker/{__version__}"
 COMPRESSIONS = ("zstd", "lz4", "none")
 # MCAP opcodes of the summary groups (spec), for the summary offsets.
-_OP_SCHEMA, _OP_CHANNEL, _OP_CHUNK, _OP_CHUNK_INDEX = 0x03, 0x04, 0x06, 0x08
+_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_CHUNK_INDEX = 0x03, 0x04, 0x05, 0x06, 0x08
 _OP_ATTACHMENT_INDEX, _OP_STATISTICS, _OP_METADATA_INDEX = 0x0A, 0x0B, 0x0D
 
 
@@ -100,40 +99,49 @@ class Compression:
     def name(self) -> str:
         return "" if self.kind == "none" else self.kind
 
-    def compressor(self):
+    def compress(self, pieces: list[bytes], size: int) -> bytes:
+        """The pieces, concatenated and compressed. zstd takes them one by one (no joined
+        copy, and it releases the GIL while it works)."""
         if self.kind == "zstd":
-            zc = zstandard.ZstdCompressor(level=self.level, threads=self.threads)
-            return zc.compress
-        if self.kind == "lz4":
-            return lz4.frame.compress
-        return bytes
+            stream = zstandard.ZstdCompressor(level=self.level, threads=self.threads).compressobj(size=size)
+            return b"".join([*(stream.compress(p) for p in pieces), stream.flush()])
+        joined = b"".join(pieces)
+        return lz4.frame.compress(joined) if self.kind == "lz4" else joined
+
+
+# Fixed parts of a Message record (opcode, length, channel, sequence, log and publish time)
+# and of a Chunk record up to its records (MCAP spec): packed here, so a frame's data is
+# referenced, not copied, until its chunk is compressed.
+_MESSAGE_HEAD = struct.Struct("<BQHIQQ")
+_CHUNK_FIXED = struct.Struct("<BQQQQI")
 
 
 @dataclass
 class OpenChunk:
-    """Messages of one chunk, serialised but not yet compressed."""
+    """Messages of one chunk, serialised but not yet compressed: record heads and data as pieces."""
 
-    records: RecordBuilder = field(default_factory=RecordBuilder)
+    pieces: list[bytes] = field(default_factory=list)
+    size: int = 0  # uncompressed bytes
+    crc: int = 0  # CRC-32 of those bytes, kept as they come (zlib releases the GIL on large data)
     start_ns: int = 0
     end_ns: int = 0
     messages: int = 0
     index: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
     per_channel: dict[int, int] = field(default_factory=dict)
 
-    @property
-    def size(self) -> int:
-        return self.records.count
-
     def add(self, channel_id: int, log_time_ns: int, data: bytes, sequence: int = 0) -> None:
         if self.messages == 0:
             self.start_ns = self.end_ns = log_time_ns
         self.start_ns = min(self.start_ns, log_time_ns)
         self.end_ns = max(self.end_ns, log_time_ns)
-        self.index.setdefault(channel_id, []).append((log_time_ns, self.records.count))
+        self.index.setdefault(channel_id, []).append((log_time_ns, self.size))
         self.per_channel[channel_id] = self.per_channel.get(channel_id, 0) + 1
         self.messages += 1
-        Message(channel_id=channel_id, sequence=sequence & 0xFFFFFFFF, log_time=log_time_ns,
-                publish_time=log_time_ns, data=data).write(self.records)
+        head = _MESSAGE_HEAD.pack(_OP_MESSAGE, 2 + 4 + 8 + 8 + len(data), channel_id, sequence & 0xFFFFFFFF,
+                                  log_time_ns, log_time_ns)
+        self.pieces += (head, data)
+        self.crc = zlib.crc32(data, zlib.crc32(head, self.crc))
+        self.size += len(head) + len(data)
 
 
 class McapWriter:
@@ -141,8 +149,8 @@ class McapWriter:
 
     def __init__(self, out: Output, compression: Compression | None = None) -> None:
         self._out = out
-        self._compress = (compression or Compression()).compressor()
-        self._compression_name = (compression or Compression()).name
+        self._compression = compression or Compression()
+        self._compression_name = self._compression.name
         self.bytes_written = 0
         self._schemas: list[Schema] = []
         self._channels: list[Channel] = []
@@ -203,16 +211,19 @@ class McapWriter:
         self._stats.attachment_count += 1
 
     def write_chunk(self, chunk: OpenChunk) -> None:
-        """Compress and write one chunk and its message indexes (one write each)."""
+        """Compress and write one chunk, then its message indexes."""
         if chunk.messages == 0:
             return
-        raw = chunk.records.end()
-        packed = self._compress(raw)
-        Chunk(compression=self._compression_name, data=packed, message_start_time=chunk.start_ns,
-              message_end_time=chunk.end_ns, uncompressed_crc=zlib.crc32(raw), uncompressed_size=len(raw)
-              ).write(self._builder)
-        chunk_length = self._builder.count
-        chunk_offset = self._emit()
+        packed = self._compression.compress(chunk.pieces, chunk.size)
+        name = self._compression_name.encode()
+        body = 8 + 8 + 8 + 4 + 4 + len(name) + 8 + len(packed)
+        head = _CHUNK_FIXED.pack(_OP_CHUNK, body, chunk.start_ns, chunk.end_ns, chunk.size, chunk.crc) \
+            + len(name).to_bytes(4, "little") + name + len(packed).to_bytes(8, "little")
+        chunk_offset = self.bytes_written
+        chunk_length = len(head) + len(packed)
+        self._out.write(head)
+        self._out.write(packed)
+        self.bytes_written += chunk_length
         offsets = {}
         index_start = self.bytes_written
         for channel_id, records in sorted(chunk.index.items()):
@@ -223,7 +234,7 @@ class McapWriter:
         self._chunk_indexes.append(ChunkIndex(
             message_start_time=chunk.start_ns, message_end_time=chunk.end_ns, chunk_start_offset=chunk_offset,
             chunk_length=chunk_length, message_index_offsets=offsets, message_index_length=index_length,
-            compression=self._compression_name, compressed_size=len(packed), uncompressed_size=len(raw)))
+            compression=self._compression_name, compressed_size=len(packed), uncompressed_size=chunk.size))
         s = self._stats
         if s.message_count == 0:
             s.message_start_time = chunk.start_ns

@@ -56,10 +56,13 @@ class RecorderConfig:
     chunk_max_bytes: int = 48 << 20
     # Chunks compressed but not yet written (between the encoder and disk threads).
     disk_queue_chunks: int = 2
-    # Chunk compression; zstd level 1 measured best for size at the speed needed (bench/record_bench.py).
+    # Chunk compression; zstd level 1 measured best for size at the speed needed (bench/record_bench.py:
+    # negative levels save little time and double the file; level 3 takes three times as long).
     compression: str = "zstd"
     zstd_level: int = 1
-    zstd_threads: int = 0
+    # zstd's own worker threads: they compress without Python's lock (the streaming call made on
+    # the disk thread with 0 workers holds it), so the loop runs meanwhile; 2 measured fastest.
+    zstd_threads: int = 2
     # Images and annotations as protobuf (a copy per frame); "json" writes the format of
     # earlier versions (base64 images, 1.2 ms more per 720p frame and a third more bytes).
     message_encoding: str = "protobuf"
@@ -118,8 +121,11 @@ class Recorder:
     """A ``Sink`` that records every submitted frame and result. Open it with ``Recorder.open``."""
 
     def __init__(self, out: Output, path: str, info: RunInfo, health: Health | None = None,
-                 config: RecorderConfig | None = None, overruns=lambda: 0) -> None:
+                 config: RecorderConfig | None = None, overruns=lambda: 0, temporary: str | None = None) -> None:
         self.path = path
+        # ``out`` writes to ``temporary`` (beside ``path``), renamed over ``path`` once the first
+        # chunk is on disk: until there is something to keep, an existing file stays as it was.
+        self._temporary = temporary
         self.info = info
         self.config = config or RecorderConfig()
         self.health = health or Health()
@@ -157,16 +163,22 @@ class Recorder:
     @classmethod
     def open(cls, path: str, info: RunInfo, health: Health | None = None, config: RecorderConfig | None = None,
              overruns=lambda: 0) -> Recorder:
-        """Create ``path``; an unwritable path is bad input (exit 2) and leaves no file behind."""
+        """Record to ``path``: to a temporary file beside it, moved over ``path`` when the first
+        chunk reaches the disk. An unwritable path is bad input (exit 2) and leaves no file behind;
+        a run that ends before its first chunk leaves ``path`` as it was."""
+        target = Path(path)
         try:
-            out = RawFile(path)
+            fd, temporary = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent or ".")
+            os.close(fd)
+            os.chmod(temporary, 0o644)  # as a new file would be; mkstemp makes it private
+            out = RawFile(temporary)
         except OSError as exc:
             raise BadInput(f"--record {path}: cannot write the recording: {exc.strerror}") from None
         try:
-            return cls(out, path, info, health, config, overruns)
+            return cls(out, path, info, health, config, overruns, temporary)
         except OSError as exc:
             out.close()
-            _remove(path)
+            _remove(temporary)
             raise BadInput(f"--record {path}: cannot write the recording: {exc.strerror}") from None
 
     # --- the loop's side -----------------------------------------------------------------------
@@ -221,6 +233,9 @@ class Recorder:
             close = getattr(self._out, "close", None)
             if close:
                 close()
+            if self._temporary:  # no chunk reached the disk: nothing to keep
+                _remove(self._temporary)
+                self._temporary = None
         if self._failed:
             raise RecordingError(self._failed)
         log.debug("recording %s: %d frames, %d bytes", self.path, self.frames_written, self._writer.bytes_written)
@@ -281,6 +296,9 @@ class Recorder:
             try:
                 self._writer.write_chunk(chunk)
                 self.frames_written += frames
+                if self._temporary:
+                    os.replace(self._temporary, self.path)
+                    self._temporary = None
             except OSError as exc:
                 self._fail(exc)
                 # Cut the partial chunk off: the file stays a clean (summary-less) recording, and
@@ -297,8 +315,9 @@ class Recorder:
         if self._failed:
             return
         why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        self._failed = (f"recording stopped: {self.path}: {why} (after {self.frames_written} frames); "
-                        f"the file replays up to there")
+        kept = ("the file replays up to there" if self.frames_written or not self._temporary
+                else "nothing was recorded, an existing file is left as it was")
+        self._failed = f"recording stopped: {self.path}: {why} (after {self.frames_written} frames); {kept}"
         self.health.recording_ok = False
         self.health.set_fault(FAULT_RECORDING)
         log.error("%s; tracking continues", self._failed)
