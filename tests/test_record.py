@@ -388,3 +388,4 @@ def test_a_recording_stopped_before_its_first_chunk_leaves_an_existing_file_alon
     recorder.close()  # no frame: nothing to keep
     assert target.read_bytes() == b"an earlier recording"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.mcap"]
+
