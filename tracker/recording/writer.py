@@ -70,6 +70,8 @@ class RecorderConfig:
     def __post_init__(self) -> None:
         if self.compression not in COMPRESSIONS:
             raise BadInput(f"recorder compression: expected one of {COMPRESSIONS}, got {self.compression!r}")
+        if not -7 <= self.zstd_level <= 22:
+            raise BadInput(f"recorder zstd level: expected -7 to 22, got {self.zstd_level}")
         if self.message_encoding not in schemas.ENCODINGS:
             raise BadInput(f"recorder message_encoding: expected one of {schemas.ENCODINGS}, "
                            f"got {self.message_encoding!r}")
