@@ -253,7 +253,9 @@ class Recorder:
                     return
 
     def _encode_loop(self) -> None:
-        chunk, frames = OpenChunk(), 0
+        # Each chunk's buffer is sized like the last one: allocated once, not grown frame by frame.
+        capacity = 1 << 20
+        chunk, frames = OpenChunk(capacity), 0
         cfg = self.config
         try:
             while True:
@@ -267,7 +269,8 @@ class Recorder:
                 frames += 1
                 if chunk.size >= cfg.chunk_max_bytes or chunk.end_ns - chunk.start_ns >= cfg.chunk_duration_ns:
                     self._put_always(self._chunks_out, (chunk, frames))
-                    chunk, frames = OpenChunk(), 0
+                    capacity = min(chunk.size + chunk.size // 8, cfg.chunk_max_bytes + (8 << 20))
+                    chunk, frames = OpenChunk(capacity), 0
         except Exception as exc:  # an encoder bug must not kill the loop: stop recording, say why
             log.exception("recorder: encoding failed")
             self._fail(exc)
