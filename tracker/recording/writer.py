@@ -136,6 +136,7 @@ class Recorder:
         self._overlay = schemas.Overlay(info.calibration, info.config.measure.part_height_mm)
         self._frames_in: queue.Queue[Any] = queue.Queue(self.config.queue_frames)
         self._chunks_out: queue.Queue[Any] = queue.Queue(self.config.disk_queue_chunks)
+        self._spares: queue.SimpleQueue[bytearray] = queue.SimpleQueue()  # written chunks' buffers
         self._failed: str = ""
         self._closed = False
         self.frames_submitted = 0
@@ -253,7 +254,8 @@ class Recorder:
                     return
 
     def _encode_loop(self) -> None:
-        # Each chunk's buffer is sized like the last one: allocated once, not grown frame by frame.
+        # Each chunk's buffer is sized like the last one: allocated once, not grown frame by frame,
+        # and reused once the disk thread has written it.
         capacity = 1 << 20
         chunk, frames = OpenChunk(capacity), 0
         cfg = self.config
@@ -270,7 +272,7 @@ class Recorder:
                 if chunk.size >= cfg.chunk_max_bytes or chunk.end_ns - chunk.start_ns >= cfg.chunk_duration_ns:
                     self._put_always(self._chunks_out, (chunk, frames))
                     capacity = min(chunk.size + chunk.size // 8, cfg.chunk_max_bytes + (8 << 20))
-                    chunk, frames = OpenChunk(capacity), 0
+                    chunk, frames = OpenChunk(capacity, self._spare()), 0
         except Exception as exc:  # an encoder bug must not kill the loop: stop recording, say why
             log.exception("recorder: encoding failed")
             self._fail(exc)
@@ -289,6 +291,12 @@ class Recorder:
             self._track_sequence += 1
             chunk.add(ch[schemas.TOPIC_TRACK], t, schemas.encode_track(result, obj), self._track_sequence)
 
+    def _spare(self) -> bytearray | None:
+        try:
+            return self._spares.get_nowait()
+        except queue.Empty:
+            return None
+
     def _disk_loop(self) -> None:
         while True:
             item = self._chunks_out.get()
@@ -300,6 +308,7 @@ class Recorder:
             good = self._writer.bytes_written
             try:
                 self._writer.write_chunk(chunk)
+                self._spares.put(chunk.buffer)
                 self.frames_written += frames
                 if self._temporary:
                     os.replace(self._temporary, self.path)
