@@ -389,3 +389,18 @@ def test_a_recording_stopped_before_its_first_chunk_leaves_an_existing_file_alon
     assert target.read_bytes() == b"an earlier recording"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.mcap"]
 
+
+
+@pytest.mark.parametrize("shape", [(720, 1280), (3, 5), (1, 200)])
+def test_the_image_message_parses_as_the_librarys_own(shape):
+    """The pixels are appended after the library's encoding of the other fields: the same message."""
+    from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+
+    from tracker.recording import schemas
+
+    image = np.random.default_rng(1).integers(0, 256, shape, dtype=np.uint8)
+    expected = RawImage(frame_id="camera", width=shape[1], height=shape[0], encoding="mono8", step=shape[1],
+                        data=image.tobytes())
+    expected.timestamp.FromNanoseconds(5_000_000_123)
+    assert RawImage.FromString(schemas.encode_image_pb(image, 5_000_000_123)) == expected
+    assert np.array_equal(schemas.decode_image(schemas.encode_image_pb(image, 0), "x", "protobuf"), image)

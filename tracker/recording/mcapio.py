@@ -135,14 +135,17 @@ class OpenChunk:
     def data(self) -> memoryview:
         return memoryview(self.buffer)[:self.size]
 
-    def _put(self, data: bytes) -> None:
+    def _put(self, data: bytes | memoryview) -> None:
         end = self.size + len(data)
         if end > len(self.buffer):
             self.buffer.extend(bytes(max(end - len(self.buffer), len(self.buffer) // 2)))
         self.buffer[self.size:end] = data
         self.size = end
 
-    def add(self, channel_id: int, log_time_ns: int, data: bytes, sequence: int = 0) -> None:
+    def add(self, channel_id: int, log_time_ns: int, data: bytes | tuple, sequence: int = 0) -> None:
+        """One message; ``data`` is its bytes, or a tuple of pieces to concatenate."""
+        pieces = data if isinstance(data, tuple) else (data,)
+        length = sum(len(p) for p in pieces)
         if self.messages == 0:
             self.start_ns = self.end_ns = log_time_ns
         self.start_ns = min(self.start_ns, log_time_ns)
@@ -150,9 +153,10 @@ class OpenChunk:
         self.index.setdefault(channel_id, []).append((log_time_ns, self.size))
         self.per_channel[channel_id] = self.per_channel.get(channel_id, 0) + 1
         self.messages += 1
-        self._put(_MESSAGE_HEAD.pack(_OP_MESSAGE, 2 + 4 + 8 + 8 + len(data), channel_id, sequence & 0xFFFFFFFF,
+        self._put(_MESSAGE_HEAD.pack(_OP_MESSAGE, 2 + 4 + 8 + 8 + length, channel_id, sequence & 0xFFFFFFFF,
                                      log_time_ns, log_time_ns))
-        self._put(data)
+        for piece in pieces:
+            self._put(piece)
 
 
 class McapWriter:

@@ -16,6 +16,7 @@ read: ``decode_image`` takes the channel's message encoding.
 from __future__ import annotations
 
 import base64
+import functools
 import json
 import math
 from dataclasses import dataclass
@@ -175,13 +176,28 @@ def _dumps(obj: dict) -> bytes:
     return json.dumps(obj, allow_nan=False, separators=(",", ":")).encode()
 
 
-def encode_image_pb(image: np.ndarray, t_ns: int) -> bytes:
-    """A foxglove.RawImage (mono8), protobuf."""
+def image_pb_parts(image: np.ndarray, t_ns: int) -> tuple[bytes, bytes, memoryview]:
+    """A foxglove.RawImage (mono8), protobuf, in three pieces whose concatenation is the message:
+    every field but the pixels, the key and length of the pixels' field, the pixels themselves.
+    Both encoded pieces come from the protobuf library; the pixels are not copied until they go
+    into the chunk (the library's own serialisation copies a 720p frame three times: ~1 ms).
+    Protobuf parsers accept fields in any order, so the pixels last is a valid message."""
     height, width = image.shape
-    msg = RawImage(frame_id=FRAME_ID, width=width, height=height, encoding="mono8", step=width,
-                   data=np.ascontiguousarray(image).tobytes())
+    msg = RawImage(frame_id=FRAME_ID, width=width, height=height, encoding="mono8", step=width)
     msg.timestamp.FromNanoseconds(t_ns)
-    return msg.SerializeToString()
+    pixels = memoryview(np.ascontiguousarray(image)).cast("B")
+    return msg.SerializeToString(), _data_key(len(pixels)), pixels
+
+
+@functools.lru_cache(maxsize=16)
+def _data_key(size: int) -> bytes:
+    """What the protobuf library writes before a RawImage ``data`` field of ``size`` bytes."""
+    return RawImage(data=bytes(size)).SerializeToString()[:-size] if size else b""
+
+
+def encode_image_pb(image: np.ndarray, t_ns: int) -> bytes:
+    """A foxglove.RawImage (mono8), protobuf, as one bytes object."""
+    return b"".join(image_pb_parts(image, t_ns))
 
 
 def encode_image(image: np.ndarray, t_ns: int) -> bytes:

@@ -150,7 +150,7 @@ class Recorder:
             schema_id = self._writer.add_schema(schema_name, schema_encoding, data)
             self._channels[topic] = self._writer.add_channel(topic, message_encoding, schema_id)
         binary = self.config.message_encoding == "protobuf"
-        self._encode_image = schemas.encode_image_pb if binary else schemas.encode_image
+        self._encode_image = schemas.image_pb_parts if binary else schemas.encode_image
         self._encode_annotations = self._overlay.encode_pb if binary else self._overlay.encode
         # /tracker/track carries one message per object: its own sequence, unique on its channel.
         self._track_sequence = 0
