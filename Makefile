@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test lint bench clean
+.PHONY: run test lint bench demo clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +23,10 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench.py
+
+# Remakes the bundled demo recording (the same bytes for the same software: no wall-clock time in it).
+demo: $(STAMP)
+	$(BIN)/tracker synth demo --record recordings/demo.mcap --force --zstd-level 19
 
 clean:
 	rm -rf $(VENV) .pytest_cache

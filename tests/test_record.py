@@ -1,5 +1,6 @@
 """Recording every frame to MCAP, replaying it bit-exactly, and surviving kills and full disks."""
 
+import contextlib
 import dataclasses
 import errno
 import json
@@ -13,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
 
 from tracker import calibration as calib_io
 from tracker.cli import main
@@ -67,30 +69,45 @@ def test_frames_come_back_bit_exact_with_their_capture_times(recorded, scene_dir
     assert source.config == TrackerConfig()
 
 
-def test_recording_opens_with_the_mcap_reader_as_foxglove_types(recorded):
+def test_recording_opens_with_the_mcap_reader_as_foxglove_types(recorded, scene_dir):
+    """The official reader, with the official protobuf decoder built from the schemas in the file
+    alone, reads Foxglove's binary types; our own types are JSON."""
     rec, live = recorded
     with open(rec, "rb") as f:
-        reader = make_reader(f)
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
         summary = reader.get_summary()
-        names = {s.name for s in summary.schemas.values()}
-        assert {"foxglove.RawImage", "foxglove.ImageAnnotations"} <= names
-        assert {s.encoding for s in summary.schemas.values()} == {"jsonschema"}
+        encodings = {s.name: s.encoding for s in summary.schemas.values()}
+        assert encodings == {"foxglove.RawImage": "protobuf", "foxglove.ImageAnnotations": "protobuf",
+                             "tracker.FramePoses": "jsonschema", "tracker.TrackPoint": "jsonschema"}
         n_live = len(live.read_text().splitlines())
         by_topic = {}
-        for schema, channel, message in reader.iter_messages():
-            by_topic.setdefault(channel.topic, []).append((schema.name, message))
+        for schema, channel, message, decoded in reader.iter_decoded_messages(
+                topics=["/camera/image", "/tracker/annotations"]):
+            by_topic.setdefault(channel.topic, []).append((schema.name, message, decoded))
+        tracks = [m for _, c, m in reader.iter_messages(topics=["/tracker/track"])]
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
         attachments = {a.name: a for a in reader.iter_attachments()}
-    images = [m for s, m in by_topic["/camera/image"] if s == "foxglove.RawImage"]
-    assert len(images) == n_live
-    first = json.loads(images[0].data)
-    assert first["encoding"] == "mono8" and first["step"] == first["width"]
-    assert images[0].log_time == 0 and images[1].log_time == round(1e9 / 30)
-    annotations = [json.loads(m.data) for s, m in by_topic["/tracker/annotations"]]
-    assert len(annotations) == n_live and any(a["points"] for a in annotations)
+    images = by_topic["/camera/image"]
+    assert len(images) == n_live and all(s == "foxglove.RawImage" for s, _, _ in images)
+    first = images[0][2]
+    assert first.encoding == "mono8" and first.step == first.width and first.frame_id == "camera"
+    # The pixels are the frame's own, and the stamps its capture time.
+    original = ImageSequenceSource(str(scene_dir / "frames" / "%05d.png"), fps=30.0)
+    frame1 = list(zip(range(2), original, strict=False))[1][1]
+    pixels = np.frombuffer(images[1][2].data, np.uint8).reshape(images[1][2].height, images[1][2].width)
+    assert np.array_equal(pixels, frame1.image)
+    assert images[1][2].timestamp.ToNanoseconds() == images[1][1].log_time == round(1e9 / 30)
+    assert images[0][1].log_time == 0
+    assert [m.sequence for _, m, _ in images] == list(range(n_live))
+    annotations = [d for _, _, d in by_topic["/tracker/annotations"]]
+    assert len(annotations) == n_live and any(a.points for a in annotations)
     # A part's rectangle is a closed polygon of 4 image points, beside its centroid and id.
-    drawn = next(a for a in annotations if a["points"])
-    assert any(len(p["points"]) == 4 for p in drawn["points"]) and drawn["texts"]
+    drawn = next(a for a in annotations if a.points)
+    assert any(len(p.points) == 4 and p.type == p.LINE_LOOP for p in drawn.points) and drawn.texts
+    assert drawn.texts[0].text.startswith("#")
+    # One message per tracked object per frame, each with its own sequence number on its channel.
+    assert tracks and len({m.sequence for m in tracks}) == len(tracks)
+    assert {"frame", "id", "x_mm"} <= set(json.loads(tracks[0].data))
     # Settings, version and calibration travel with the file.
     run = metadata["tracker.run"]
     assert json.loads(run["config"]) == TrackerConfig().to_dict() and run["version"]
@@ -140,14 +157,15 @@ def test_a_cut_recording_replays_up_to_where_it_ends(recorded, tmp_path, fractio
         assert len(replayed) >= 25
 
 
-def test_sigkill_leaves_a_recording_that_replays(scene_dir, tmp_path):
+def test_sigkill_leaves_a_recording_that_replays(tmp_path):
     rec = tmp_path / "killed.mcap"
-    # Rendering the synthetic demo live is slow enough for the run to be killed in the middle.
-    proc = subprocess.Popen([sys.executable, "-m", "tracker", "synth", "demo", "--record", str(rec)],
+    # The bundled demo played at its recorded rate (8 s) is long enough to be killed in the middle.
+    proc = subprocess.Popen([sys.executable, "-m", "tracker", "run", "--source", str(ROOT / "recordings" / "demo.mcap"),
+                             "--realtime", "--no-plc", "--quiet", "--record", str(rec)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 120
-    # Wait until at least two chunks (~1 s of frames each) reached the file.
-    while time.monotonic() < deadline and (not rec.exists() or rec.stat().st_size < 300_000):
+    # The file appears under its name with its first chunk (~1 s of frames); wait for the second.
+    while time.monotonic() < deadline and (not rec.exists() or rec.stat().st_size < 2 * _first_chunk_end(rec)):
         if proc.poll() is not None:
             pytest.fail("tracker run ended before it could be killed")
         time.sleep(0.05)
@@ -157,7 +175,20 @@ def test_sigkill_leaves_a_recording_that_replays(scene_dir, tmp_path):
     replay = _tracker("replay", str(rec), "--poses", str(out))
     assert replay.returncode == 0, replay.stderr
     assert "cut short" in replay.stderr or "without its summary" in replay.stderr
-    assert len(out.read_text().splitlines()) >= 10
+    assert len(out.read_text().splitlines()) >= 30
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def _first_chunk_end(path) -> int:
+    """Bytes up to the end of the first chunk's message indexes (0 while there is none)."""
+    from tracker.recording.mcapio import ReadEnd, iter_records
+
+    end = ReadEnd()
+    with contextlib.suppress(OSError), open(path, "rb") as f:
+        for record in iter_records(f, end, emit_chunks=True):
+            if type(record).__name__ == "Chunk":
+                return end.position
+    return 10**12
 
 
 class FullDisk:
@@ -207,10 +238,14 @@ def test_full_tmpfs_for_real(recorded, tmp_path):
         pytest.skip("mounting a tmpfs needs root")
     mnt = tmp_path / "small"
     mnt.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(mnt)], capture_output=True).returncode:
+    rec, live = recorded
+    # Room for the first chunk of the same recording, not for the second.
+    size = _first_chunk_end(rec) + 1_000_000
+    assert size < rec.stat().st_size
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)],
+                      capture_output=True).returncode:
         pytest.skip("cannot mount a tmpfs here")
     try:
-        rec, live = recorded
         poses = tmp_path / "poses.jsonl"
         proc = _tracker("run", "--source", str(rec), "--no-plc", "--quiet", "--record", str(mnt / "r.mcap"),
                         "--poses", str(poses))
@@ -218,6 +253,7 @@ def test_full_tmpfs_for_real(recorded, tmp_path):
         assert "No space left on device" in proc.stderr and "Traceback" not in proc.stderr
         assert poses.read_bytes() == live.read_bytes()  # tracking continued to the last frame
         assert main(["replay", str(mnt / "r.mcap"), "--check"]) == 0
+        assert [p.name for p in mnt.iterdir()] == ["r.mcap"]  # no temporary file left behind
     finally:
         subprocess.run(["umount", str(mnt)], check=False)
 
@@ -248,3 +284,124 @@ def test_unreadable_recording_is_bad_input(tmp_path, capsys):
     junk.write_bytes(b"not an mcap file at all")
     assert main(["replay", str(junk)]) == 2
     assert "junk.mcap" in capsys.readouterr().err
+
+
+def _chunk_starts(path) -> list[int]:
+    """Byte offsets where the recording's chunks begin."""
+    from tracker.recording.mcapio import ReadEnd, iter_records
+
+    starts, end, before = [], ReadEnd(), 0
+    with open(path, "rb") as f:
+        for record in iter_records(f, end, emit_chunks=True):
+            if type(record).__name__ == "Chunk":
+                starts.append(before)
+            before = end.position
+    return starts
+
+
+def _damaged_copy(rec, tmp_path, offset: int, nbytes: int = 4, only_xor: int = 0xFF):
+    data = bytearray(rec.read_bytes())
+    for i in range(offset, offset + nbytes):
+        data[i] ^= only_xor
+    out = tmp_path / "damaged.mcap"
+    out.write_bytes(bytes(data))
+    return out
+
+
+@pytest.mark.parametrize("which", [0, 1])
+def test_flipped_bytes_at_a_chunks_start_fail_the_check_naming_the_byte(recorded, tmp_path, capsys, which):
+    rec, live = recorded
+    starts = _chunk_starts(rec)
+    assert len(starts) >= 2
+    damaged = _damaged_copy(rec, tmp_path, starts[which])
+    poses = tmp_path / "p.jsonl"
+    assert main(["replay", str(damaged), "--check", "--quiet", "--poses", str(poses)]) == 1
+    err = capsys.readouterr().err
+    assert f"damaged at byte {starts[which]}" in err and len(err.strip().splitlines()) == 1
+    # A run on the damaged file says so too, after tracking the frames before the damage.
+    assert main(["run", "--source", str(damaged), "--no-plc", "--quiet", "--poses", str(poses)]) == 1
+    err = capsys.readouterr().err
+    assert f"damaged at byte {starts[which]}" in err
+    lines = poses.read_text().splitlines()
+    assert lines == live.read_text().splitlines()[: len(lines)] and (len(lines) >= 25) == (which == 1)
+
+
+def test_a_chunk_whose_type_byte_is_wrong_is_missing_frames_not_a_clean_end(recorded, tmp_path, capsys):
+    """An unknown record type is skipped by MCAP readers: the frames it held would vanish silently."""
+    rec, _ = recorded
+    starts = _chunk_starts(rec)
+    damaged = _damaged_copy(rec, tmp_path, starts[0], nbytes=1, only_xor=0x80)
+    assert main(["replay", str(damaged), "--check"]) == 1
+    err = capsys.readouterr().err
+    assert "frames 0-" in err and "missing" in err
+
+
+def test_bytes_flipped_inside_a_chunk_fail_replay_and_run(recorded, tmp_path, capsys):
+    rec, _ = recorded
+    starts = _chunk_starts(rec)
+    damaged = _damaged_copy(rec, tmp_path, starts[1] + 5000, nbytes=4)
+    assert main(["replay", str(damaged), "--check"]) == 1
+    assert f"damaged at byte {starts[1]}" in capsys.readouterr().err
+    assert main(["run", "--source", str(damaged), "--no-plc", "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert f"damaged at byte {starts[1]}" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("cut", [1, 4, 7])
+def test_a_file_cut_inside_its_closing_magic_is_reported_as_cut(recorded, tmp_path, capsys, cut):
+    rec, live = recorded
+    short = tmp_path / "short.mcap"
+    short.write_bytes(rec.read_bytes()[:-cut])
+    poses = tmp_path / "p.jsonl"
+    assert main(["replay", str(short), "--check", "--poses", str(poses)]) == 0
+    assert "cut short" in capsys.readouterr().err
+    assert poses.read_bytes() == live.read_bytes()  # every frame is there all the same
+
+
+def test_recordings_in_the_json_encoding_of_earlier_versions_still_replay(recorded, tmp_path, capsys):
+    from tracker.recording.writer import RecorderConfig
+
+    rec, live = recorded
+    source = McapSource(str(rec), None)
+    old = tmp_path / "json.mcap"
+    recorder = Recorder.open(str(old), RunInfo(source.calibration, source.config, "old", 30.0),
+                             config=RecorderConfig(message_encoding="json"))
+    pipeline = Pipeline(source.calibration, source.config)
+    for frame in source:
+        recorder.submit(frame, pipeline.process(frame.index, frame.image, frame.t_ns))
+    recorder.close()
+    with open(old, "rb") as f:
+        assert {s.encoding for s in make_reader(f).get_summary().schemas.values()} == {"jsonschema"}
+    replayed = tmp_path / "p.jsonl"
+    assert main(["replay", str(old), "--check", "--poses", str(replayed)]) == 0
+    assert replayed.read_bytes() == live.read_bytes()
+    pairs = zip(McapSource(str(old)), McapSource(str(rec)), strict=True)
+    assert all(np.array_equal(a.image, b.image) for a, b in pairs)
+
+
+def test_a_recording_stopped_before_its_first_chunk_leaves_an_existing_file_alone(recorded, tmp_path):
+    rec, _ = recorded
+    source = McapSource(str(rec), None)
+    target = tmp_path / "keep.mcap"
+    target.write_bytes(b"an earlier recording")
+    recorder = Recorder.open(str(target), RunInfo(source.calibration, source.config, "x", 30.0))
+    assert target.read_bytes() == b"an earlier recording"  # not touched at open
+    recorder.close()  # no frame: nothing to keep
+    assert target.read_bytes() == b"an earlier recording"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.mcap"]
+
+
+
+@pytest.mark.parametrize("shape", [(720, 1280), (3, 5), (1, 200)])
+def test_the_image_message_parses_as_the_librarys_own(shape):
+    """The pixels are appended after the library's encoding of the other fields: the same message."""
+    from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+
+    from tracker.recording import schemas
+
+    image = np.random.default_rng(1).integers(0, 256, shape, dtype=np.uint8)
+    expected = RawImage(frame_id="camera", width=shape[1], height=shape[0], encoding="mono8", step=shape[1],
+                        data=image.tobytes())
+    expected.timestamp.FromNanoseconds(5_000_000_123)
+    assert RawImage.FromString(schemas.encode_image_pb(image, 5_000_000_123)) == expected
+    assert np.array_equal(schemas.decode_image(schemas.encode_image_pb(image, 0), "x", "protobuf"), image)

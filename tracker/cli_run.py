@@ -15,7 +15,7 @@ from tracker.cli_types import CAMERA_INDEX_MAX, FPS, FRAME_COUNT
 from tracker.config import TrackerConfig
 from tracker.errors import BadInput, SourceError
 from tracker.health import Health
-from tracker.outputs import PublishOnFirstFrame, StagedFile, refuse_clashes
+from tracker.outputs import PublishOnFirstFrame, StagedFile, check_target, refuse_clashes
 from tracker.pipeline import Pipeline
 from tracker.pose_sink import PoseSink
 from tracker.runner import Runner, Sink, StatusLine
@@ -138,8 +138,8 @@ def _record_sink(path: str, health: Health, source, calibration, config, fps: fl
 
 def _open_sinks(args: argparse.Namespace, health: Health, source, calibration, config, demo: bool,
                 staged: list[StagedFile]) -> list[Sink]:
-    """Pose stream, PLC, recorder. Output files are staged (see tracker/outputs.py): they replace
-    an existing file only once the first frame is processed."""
+    """Pose stream, PLC, recorder. Output files are staged (see tracker/outputs.py and the
+    recorder): they replace an existing file only once there is something to keep."""
     refuse_clashes({"--poses": args.poses, "--record": args.record},
                    {"--source": None if args.source.isdigit() else args.source,
                     "--calibration": args.calibration, "--config": args.config})
@@ -152,9 +152,9 @@ def _open_sinks(args: argparse.Namespace, health: Health, source, calibration, c
         if plc is not None:
             sinks.append(plc)
         if args.record:
-            staged.append(record := StagedFile("--record", args.record, "the recording"))
-            sinks.append(PublishOnFirstFrame(
-                _record_sink(record.path, health, source, calibration, config, args.fps), record))
+            # The recorder stages its own file (moved into place with its first chunk).
+            check_target("--record", args.record, "the recording")
+            sinks.append(_record_sink(args.record, health, source, calibration, config, args.fps))
     except BaseException:
         for sink in sinks:
             sink.close()

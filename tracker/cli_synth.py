@@ -5,7 +5,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
+import sys
 from pathlib import Path
+from typing import TextIO
 
 import cv2
 
@@ -18,13 +21,20 @@ from tracker.synthetic import Renderer, SceneSpec
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "synth", help="render a synthetic scene (frames, calibration, ground truth)",
-        description="Writes DIR/frames/%%05d.png, DIR/calibration.yaml, DIR/truth.jsonl (pose-stream shape) "
-        "and DIR/scene.json.",
+        description="With --out DIR: writes DIR/frames/%05d.png, DIR/calibration.yaml, DIR/truth.jsonl "
+        "(pose-stream shape) and DIR/scene.json. With --record OUT.mcap: tracks the scene and records it "
+        "(the same command gives the same bytes; `make demo` remakes recordings/demo.mcap).",
     )
     p.add_argument("preset", choices=sorted(PRESETS), help="scene to render")
-    p.add_argument("--out", help="output folder")
-    p.add_argument("--record", metavar="OUT.mcap",
-                   help="instead of files, track the scene and record it (how recordings/demo.mcap is made)")
+    out = p.add_mutually_exclusive_group()
+    out.add_argument("--out", help="output folder")
+    out.add_argument("--record", metavar="OUT.mcap",
+                     help="instead of files, track the scene and record it (how recordings/demo.mcap is made)")
+    p.add_argument("--force", action="store_true", help="replace an existing --record file")
+    p.add_argument("--zstd-level", type=int, metavar="N",
+                   help="with --record, compress harder than a live recording does (default: the recorder's, 1; "
+                        "`make demo` uses 19: a third smaller, twice the time)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--frames", type=int, help="number of frames (default: the preset's)")
     p.add_argument("--size", help="WIDTHxHEIGHT (same field of view)")
     p.add_argument("--noise", type=float, help="sensor noise sigma, grey levels")
@@ -53,7 +63,7 @@ def scene_from_args(args: argparse.Namespace) -> SceneSpec:
     return scene
 
 
-def write_scene(scene: SceneSpec, out: Path) -> Path:
+def write_scene(scene: SceneSpec, out: Path, progress_out: TextIO | None = None) -> Path:
     """Render every frame; returns the printf pattern of the frames."""
     frames = out / "frames"
     try:
@@ -63,26 +73,49 @@ def write_scene(scene: SceneSpec, out: Path) -> Path:
     renderer = Renderer(scene)
     calib_io.save(renderer.calibration, out / "calibration.yaml")
     (out / "scene.json").write_text(json.dumps(dataclasses.asdict(scene), indent=1))
+    progress = _progress(progress_out, scene.n_frames)
     with open(out / "truth.jsonl", "w", encoding="utf-8") as truth_file:
         for index in range(scene.n_frames):
             image, truth = renderer.render(index)
             if not cv2.imwrite(str(frames / f"{index:05d}.png"), image, [cv2.IMWRITE_PNG_COMPRESSION, 1]):
                 raise BadInput(f"{frames}: cannot write frame {index}")
             truth_file.write(json.dumps(truth) + "\n")
+            if progress:
+                progress.update(index + 1)
+    if progress:
+        progress.end(scene.n_frames)
     return frames / "%05d.png"
+
+
+def _progress(out: TextIO | None, total: int):
+    if out is None:
+        return None
+    from tracker.recording.replay import Progress  # noqa: PLC0415 - the bar lives with the recording tools
+
+    return Progress(out, total, "synth")
 
 
 def run(args: argparse.Namespace) -> int:
     scene = scene_from_args(args)
+    progress_out = None if args.quiet else sys.stderr
     if args.record:
+        if os.path.exists(args.record) and not args.force:
+            raise BadInput(f"--record {args.record}: the file exists (give --force to replace it)")
         from tracker.recording.demo import record_scene  # noqa: PLC0415 - optional edge
+        from tracker.recording.writer import RecorderConfig  # noqa: PLC0415
 
-        summary = record_scene(scene, args.record, name=f"synthetic {args.preset}")
+        if args.zstd_level is not None and not -7 <= args.zstd_level <= 22:
+            raise BadInput(f"--zstd-level: expected -7 to 22, got {args.zstd_level}")
+        recorder = RecorderConfig() if args.zstd_level is None else RecorderConfig(zstd_level=args.zstd_level)
+        summary = record_scene(scene, args.record, name=f"synthetic {args.preset}", recorder=recorder,
+                               progress_out=progress_out)
         print(f"tracker: {summary.line()} -> {args.record}")
         return 0
     if not args.out:
         raise BadInput("synth: give --out DIR (frames on disk) or --record OUT.mcap")
-    pattern = write_scene(scene, Path(args.out))
+    if args.zstd_level is not None or args.force:
+        raise BadInput("synth: --zstd-level and --force go with --record")
+    pattern = write_scene(scene, Path(args.out), progress_out)
     print(f"tracker: {scene.n_frames} frames at {scene.fps:g} fps -> {pattern}")
     print(f"tracker: run it with: tracker run --source {pattern} --calibration {Path(args.out) / 'calibration.yaml'} "
           f"--fps {scene.fps:g} --no-plc --poses poses.jsonl")

@@ -62,6 +62,16 @@ def refuse_clashes(outputs: dict[str, str | None], inputs: dict[str, str | None]
                 raise BadInput(f"{opt} {path}: is the same file as {in_opt} {in_path}; it would be overwritten")
 
 
+def check_target(option: str, target: str, what: str) -> str:
+    """The folder ``target`` goes in; BadInput (exit 2) when it cannot be a file there."""
+    folder = os.path.dirname(os.path.abspath(target))
+    if os.path.isdir(target):
+        raise BadInput(f"{option} {target}: cannot write {what}: it is a folder; expected a file name")
+    if not os.path.isdir(folder):
+        raise BadInput(f"{option} {target}: cannot write {what}: the folder {folder} does not exist")
+    return folder
+
+
 class StagedFile:
     """A temporary file beside ``target``; ``publish()`` moves it into place, ``discard()`` removes it.
 
@@ -72,11 +82,7 @@ class StagedFile:
     def __init__(self, option: str, target: str, what: str = "the file") -> None:
         self.option = option
         self.target = target
-        folder = os.path.dirname(os.path.abspath(target))
-        if os.path.isdir(target):
-            raise BadInput(f"{option} {target}: cannot write {what}: it is a folder; expected a file name")
-        if not os.path.isdir(folder):
-            raise BadInput(f"{option} {target}: cannot write {what}: the folder {folder} does not exist")
+        folder = check_target(option, target, what)
         name = Path(target)
         try:
             fd, self.path = tempfile.mkstemp(prefix=f".{name.stem}.", suffix=f".partial{name.suffix}", dir=folder)

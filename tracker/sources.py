@@ -12,6 +12,7 @@ import dataclasses
 import logging
 import os
 import queue
+import re
 import threading
 import time
 from collections.abc import Iterator
@@ -107,7 +108,11 @@ class VideoFileSource(FrameSource):
 
 
 class ImageSequenceSource(FrameSource):
-    """A printf-style pattern such as ``frames/%05d.png``, numbered from 0 (or 1)."""
+    """A printf-style pattern such as ``frames/%05d.png``, numbered from 0 (or 1).
+
+    The sequence ends at the first missing number after which no numbered file follows. A
+    missing number with files after it is a gap: the run stops there with exit 1 naming the
+    missing file (skipping it would shift every later frame's number and time)."""
 
     def __init__(self, pattern: str, fps: float | None = None) -> None:
         self.name = pattern
@@ -121,6 +126,19 @@ class ImageSequenceSource(FrameSource):
         self._fps_given = fps is not None
         self._fps = fps or DEFAULT_SEQUENCE_FPS
 
+    def _next_present(self, number: int) -> str | None:
+        """The first file of the sequence after ``number``, if any (one directory listing)."""
+        folder, base = os.path.split(self.name)
+        spec = re.fullmatch(r"(.*?)%0?\d*d(.*)", base)
+        try:
+            names = os.listdir(folder or ".") if spec else []
+        except OSError:
+            return None
+        numbered = re.compile(re.escape(spec.group(1)) + r"(\d+)" + re.escape(spec.group(2))) if spec else None
+        later = sorted(int(m.group(1)) for m in map(numbered.fullmatch, names) if m) if numbered else []
+        later = [n for n in later if n > number and os.path.isfile(self.name % n)]
+        return self.name % later[0] if later else None
+
     def __iter__(self) -> Iterator[Frame]:
         if not self._fps_given:
             log.warning("%s: image sequence without --fps; assuming %.0f fps", self.name, DEFAULT_SEQUENCE_FPS)
@@ -128,6 +146,10 @@ class ImageSequenceSource(FrameSource):
         while True:
             path = self.name % (self._start + index)
             if not os.path.isfile(path):
+                following = self._next_present(self._start + index)
+                if following is not None:
+                    raise SourceLost(f"{path}: missing from the image sequence ({following} follows); "
+                                     f"stopped after {index} frames")
                 return
             image = cv2.imread(path, cv2.IMREAD_UNCHANGED)
             if image is None:

@@ -47,8 +47,9 @@ class ReplayReport:
 class Progress:
     """A progress bar on a terminal (carriage return); an occasional line elsewhere."""
 
-    def __init__(self, out: TextIO, total: int | None) -> None:
+    def __init__(self, out: TextIO, total: int | None, label: str = "replay") -> None:
         self._out = out
+        self._label = label
         self._total = total
         self._tty = out.isatty()
         self._period = PROGRESS_PERIOD_S if self._tty else PROGRESS_PERIOD_PIPE_S
@@ -64,10 +65,10 @@ class Progress:
         fps = done / max(now - self._start, 1e-9)
         if self._total:
             filled = min(BAR_WIDTH, BAR_WIDTH * done // self._total)
-            text = (f"replay [{'#' * filled}{'.' * (BAR_WIDTH - filled)}] {done}/{self._total} frames "
+            text = (f"{self._label} [{'#' * filled}{'.' * (BAR_WIDTH - filled)}] {done}/{self._total} frames "
                     f"{100 * done / self._total:.0f}% {fps:.0f} fps")
         else:
-            text = f"replay {done} frames {fps:.0f} fps"
+            text = f"{self._label} {done} frames {fps:.0f} fps"
         self._out.write(("\r" + text) if self._tty else (text + "\n"))
         self._out.flush()
         self._shown = True

@@ -112,34 +112,53 @@ class Recording:
 
     def frames(self) -> Iterator[RecordedFrame]:
         """Frames in file order, each with the poses logged live (messages of one frame are
-        written together, image first)."""
+        written together, image first). Frames missing behind damage (a gap in the frame
+        numbers, or fewer frames than the recording's end record counts) make ``end`` damaged:
+        a replay that skipped them would not be the run that was recorded."""
         image_ch = poses_ch = None
+        image_encoding = "json"
         pending: Frame | None = None
         poses: dict | None = None
+        expected = 0  # every recording numbers its frames from 0, one by one
         self.end = ReadEnd()
         with open(self.path, "rb") as f:
             for record in iter_records(f, self.end):
                 if isinstance(record, Channel):
                     if record.topic == schemas.TOPIC_IMAGE:
-                        image_ch = record.id
+                        image_ch, image_encoding = record.id, record.message_encoding
                     elif record.topic == schemas.TOPIC_POSES:
                         poses_ch = record.id
                 elif isinstance(record, Message):
                     if record.channel_id == image_ch:
+                        if record.sequence != expected:
+                            self._missing(expected, record.sequence)
+                            break
+                        expected += 1
                         if pending is not None:
                             yield RecordedFrame(pending, poses)
-                        pending, poses = self._frame(record), None
+                        pending, poses = self._frame(record, image_encoding), None
                     elif record.channel_id == poses_ch:
                         poses = json.loads(record.data)
                 elif isinstance(record, Metadata) and record.name == META_END:
                     self.end_metadata = dict(record.metadata)
         if pending is not None:
             yield RecordedFrame(pending, poses)
+        counted = self.end_metadata.get("frames", "")
+        if self.end.complete and counted.isdigit() and int(counted) > expected:
+            self.end.complete = False
+            self.end.damaged = (f"the recording holds {counted} frames, only {expected} could be read "
+                                f"(frames {expected}-{int(counted) - 1} are missing)")
 
-    def _frame(self, message: Message) -> Frame:
+    def _missing(self, expected: int, found: int) -> None:
+        self.end.complete = self.end.truncated = False
+        what = f"frame {expected}" if found == expected + 1 else f"frames {expected}-{found - 1}"
+        self.end.damaged = (f"{what} missing (the next frame found is {found})" if found > expected
+                            else f"frame {found} found where frame {expected} was expected")
+
+    def _frame(self, message: Message, encoding: str) -> Frame:
         where = f"{self.path} frame {message.sequence}"
         try:
-            image = schemas.decode_image(message.data, where)
+            image = schemas.decode_image(message.data, where, encoding)
         except (ValueError, KeyError, TypeError) as exc:
             raise RecordingError(f"{where}: cannot decode the image ({exc})") from None
         return Frame(message.sequence, message.log_time, image, time.monotonic_ns())
@@ -183,11 +202,17 @@ class McapSource(FrameSource):
         return self._recording
 
     def __iter__(self) -> Iterator[Frame]:
+        used = 0
         for position, recorded in enumerate(self._recording.frames()):
+            used = position + 1
             frame = recorded.frame
             if self._fps is not None:
                 frame = dataclasses.replace(frame, t_ns=round(position * 1e9 / self._fps))
             yield frame
         end = self._recording.end
+        if end.damaged:
+            # Frames behind the damage are lost: the run did not see the whole recording.
+            raise RecordingError(f"{end.describe(self.name)}; the run used the {used} frames "
+                                 "before it")
         if not end.complete:
             log.warning("%s", end.describe(self.name))
