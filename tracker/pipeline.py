@@ -61,7 +61,8 @@ class Pipeline:
             return self._last
         self.segmenter.belt_moving = np.hypot(motion.dx_px, motion.dy_px) >= self.config.segment.belt_still_px
         mask = self.segmenter(frame)
-        self.measurer.half_window_px = HALF_WINDOW_PX + self.segmenter.blur_px // 2
+        self.measurer.blur_px = self.segmenter.blur_px
+        self.measurer.half_window_px = HALF_WINDOW_PX + self.segmenter.blur_px // 2 + self.segmenter.blur_px // 2
         t1 = clock()
         scene_fault = self.segmenter.foreground_fraction > self.config.segment.scene_fault_fraction
         undistort_before = self.mapper.spent_ns

@@ -109,6 +109,11 @@ class SceneSpec:
     flicker: float = 0.0
     belt_level: float = 60.0
     seed: int = 0
+    # A knurled belt: a diamond texture of this amplitude (grey levels, 0: a plain belt) and
+    # period (mm on the belt), drawn on the belt plane and moving with the belt's velocity.
+    belt_texture: float = 0.0
+    belt_texture_period_mm: float = 6.0
+    belt_velocity_mm_s: tuple[float, float] = (0.0, 0.0)
 
     def t_ns(self, index: int) -> int:
         """Capture time of frame ``index``: the middle of its exposure."""
@@ -129,6 +134,10 @@ class Renderer:
         # World direction of the ray through each pixel centre (not normalised; linear in x, y).
         self._rays = norm[..., 0:1] * rot[0] + norm[..., 1:2] * rot[1] + rot[2]
         self._background = self._belt_image()
+        # Where each pixel's ray meets the belt plane (Z = 0), for a texture that moves with it.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            reach = -self._centre[2] / self._rays[..., 2]
+        self._belt_xy = (self._centre[:2] + reach[..., None] * self._rays[..., :2]).astype(np.float64)
 
     def _belt_image(self) -> np.ndarray:
         cam = self.scene.camera
@@ -137,6 +146,18 @@ class Renderer:
         # Static illumination falloff and a soft pattern: the reference must be learnt, not assumed flat.
         shade = (1.0 - 0.12 * r2) * (1.0 + 0.04 * np.cos(u / 37.0) * np.cos(v / 23.0))
         return (self.scene.belt_level * shade).astype(np.float32)
+
+    def _texture(self, times: np.ndarray) -> np.ndarray:
+        """The belt's diamond texture at the exposure's sample times (blurred by the motion like parts)."""
+        sc = self.scene
+        k = 2 * math.pi / sc.belt_texture_period_mm
+        vx, vy = sc.belt_velocity_mm_s
+        out = np.zeros(self._belt_xy.shape[:2], dtype=np.float64)
+        for t in times:
+            x = self._belt_xy[..., 0] - vx * t
+            y = self._belt_xy[..., 1] - vy * t
+            out += np.sin(k * (x + y)) * np.sin(k * (x - y))
+        return (sc.belt_texture * out / len(times)).astype(np.float32)
 
     # --- geometry ---------------------------------------------------------------------------
     def _hits(self, rays: np.ndarray, part: PartSpec, pose: tuple[float, float, float]) -> np.ndarray:
@@ -214,6 +235,8 @@ class Renderer:
         rng = np.random.default_rng([sc.seed, index])
         image = self._background.copy()
         times = self._sample_times(index)
+        if sc.belt_texture:
+            image += self._texture(times)
         truth = []
         h, w = image.shape
         for part_id, part in enumerate(sc.parts):

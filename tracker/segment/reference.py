@@ -90,8 +90,9 @@ class Segmenter:
             self.reset(frame)
             return np.zeros(frame.shape, dtype=np.uint8)
         smooth = self._smooth(frame)
-        _, fg = cv2.threshold(cv2.absdiff(smooth, self._background_blurred), cfg.diff_threshold, 255,
-                              cv2.THRESH_BINARY)
+        diff = cv2.absdiff(smooth, self._background_blurred)
+        _, fg = cv2.threshold(diff, cfg.diff_threshold, 255, cv2.THRESH_BINARY)
+
         if self._roi is not None:
             fg = cv2.bitwise_and(fg, self._roi)
         area = cv2.countNonZero(self._roi) if self._roi is not None else fg.size
