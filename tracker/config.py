@@ -11,6 +11,8 @@ from dataclasses import asdict, dataclass, field, fields
 
 from tracker.errors import BadInput
 
+SEGMENT_MODELS = ("reference", "textured")
+
 
 @dataclass(frozen=True)
 class SegmentConfig:
@@ -27,10 +29,47 @@ class SegmentConfig:
     absorb_after_frames: int = 90
     # Side of the square opening kernel that removes noise speckles from the mask.
     open_kernel_px: int = 3
+    # Belt model: "reference" (a per-pixel image of the empty belt: exact on plain belts whose
+    # look does not move) or "textured" (real belts whose texture, streaks and seams move with
+    # the parts: texture-suppressed levels against per-pixel statistics of the passing belt).
+    model: str = "reference"
+    # Region of interest, set once: the belt area as an image polygon [[x, y], ...] (pixels) or a
+    # belt polygon (mm, world frame); outside it nothing is a part. Empty: the whole image.
+    roi_px: tuple = ()
+    roi_mm: tuple = ()
+    # Foreground covering more than this fraction of the region of interest is not parts but a
+    # changed scene (light switched on, camera bumped, wrong settings): fault 5, nothing tracked.
+    scene_fault_fraction: float = 0.5
+    # At most this many blobs (the largest) are measured per frame: work per frame stays bounded.
+    max_blobs: int = 24
+    # Textured model: frames are averaged down to about this many pixels on their long side, which
+    # averages out a belt's fine texture (diamonds, fibres, compression noise) while parts, tens of
+    # pixels across, keep their level.
+    textured_work_px: int = 240
+    # Textured model: foreground where the smoothed level differs from the belt's by more than this
+    # (grey levels) and by more than textured_sigmas standard deviations of the passing belt there.
+    textured_threshold: float = 16.0
+    textured_sigmas: float = 4.0
+    # Textured model: learning rate of the belt's per-pixel mean and variance per pixel of belt
+    # travel (a stopped belt or a duplicate frame brings no new belt, so it teaches nothing).
+    textured_rate: float = 0.04
 
     def __post_init__(self) -> None:
         _positive(self, "diff_threshold", "motion_threshold", "background_every",
-                  "absorb_after_frames", "open_kernel_px")
+                  "absorb_after_frames", "open_kernel_px", "max_blobs", "textured_work_px",
+                  "textured_threshold", "textured_sigmas")
+        if self.model not in SEGMENT_MODELS:
+            raise BadInput(f"segment.model: expected one of {list(SEGMENT_MODELS)}, got {self.model!r}")
+        if self.roi_px and self.roi_mm:
+            raise BadInput("segment: expected roi_px or roi_mm, not both")
+        for name in ("roi_px", "roi_mm"):
+            _check_polygon(f"segment.{name}", getattr(self, name))
+            # Tuples: the settings stay hashable and compare equal however they were given.
+            object.__setattr__(self, name, tuple(tuple(float(v) for v in p) for p in getattr(self, name)))
+        if not 0 < self.scene_fault_fraction <= 1:
+            raise BadInput(f"segment.scene_fault_fraction: expected 0 < f <= 1, got {self.scene_fault_fraction}")
+        if not 0 < self.textured_rate <= 1:
+            raise BadInput(f"segment.textured_rate: expected 0 < rate <= 1, got {self.textured_rate}")
         if self.absorb_after_frames > 255 * self.background_every:
             raise BadInput(f"absorb_after_frames: expected <= 255 * background_every "
                            f"({255 * self.background_every}), got {self.absorb_after_frames}")
@@ -145,3 +184,14 @@ def _positive(obj: object, *names: str) -> None:
         value = getattr(obj, name)
         if not value > 0:
             raise BadInput(f"{type(obj).__name__}.{name}: expected > 0, got {value}")
+
+
+def _check_polygon(name: str, points: object) -> None:
+    if not points:
+        return
+    ok = (isinstance(points, list | tuple) and len(points) >= 3
+          and all(isinstance(p, list | tuple) and len(p) == 2
+                  and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in p)
+                  for p in points))
+    if not ok:
+        raise BadInput(f"{name}: expected a polygon of >= 3 [x, y] number pairs, got {points!r}")

@@ -7,6 +7,7 @@ recording replays to byte-identical poses.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import cv2
@@ -16,7 +17,10 @@ from tracker.calibration import Calibration
 from tracker.config import TrackerConfig
 from tracker.measure import Measurer
 from tracker.poses import FrameResult
-from tracker.segment import Segmenter
+from tracker.segment import make_segmenter
+from tracker.segment.guard import ClutterGuard
+from tracker.segment.motion import BeltMotion
+from tracker.segment.roi import roi_mask, roi_polygon_px
 from tracker.track import Tracker
 from tracker.undistort import BeltMapper
 
@@ -28,9 +32,24 @@ class Pipeline:
         calibration.require_belt()
         self.calibration = calibration
         self.config = config or TrackerConfig()
-        self.segmenter = Segmenter(self.config.segment)
+        seg = self.config.segment
+        # The region of interest as an image polygon (pixels; None: the whole frame), for previews.
+        self.roi_px = roi_polygon_px(seg, calibration)
+        roi = roi_mask(self.roi_px, calibration.size)
+        self.roi_mask = None if self.roi_px is None else roi
+        self.segmenter = make_segmenter(seg, roi)
         self.mapper = mapper = BeltMapper(calibration, self.config.measure.part_height_mm)
         self.measurer = Measurer(mapper, self.config.measure)
+        # The belt's own motion is measured where the belt model needs it (textured belts).
+        self.motion = BeltMotion(roi) if seg.model == "textured" else None
+        self._roi_centre_px = np.array(cv2.boundingRect(roi), dtype=np.float64)
+        self._roi_centre_px = self._roi_centre_px[:2] + self._roi_centre_px[2:] / 2
+        self._last_t_ns: int | None = None
+        self._belt_mm_s = (0.0, 0.0)
+        # The measurement's own cheap pre-filter (half the smallest part's area anywhere in view).
+        min_area_px = 0.5 * self.config.measure.min_area_mm2 / mapper.max_mm_per_px() ** 2
+        self.guard = ClutterGuard(roi, seg.scene_fault_fraction, seg.max_blobs, min_area_px,
+                                  self.config.measure.border_margin_px)
         outline = mapper.view_outline_mm().astype(np.float32)
         self.tracker = Tracker(self.config.track, lambda x, y: cv2.pointPolygonTest(outline, (x, y), False) >= 0)
         # Time spent per stage on the last frame (ns); for the status line and the benchmark only.
@@ -39,13 +58,38 @@ class Pipeline:
     def process(self, index: int, frame: np.ndarray, t_ns: int) -> FrameResult:
         clock = time.perf_counter_ns
         t0 = clock()
+        belt = self._belt_motion(frame, t_ns)
         mask = self.segmenter(frame)
+        if self.roi_mask is not None and self.motion is None:
+            mask = cv2.bitwise_and(mask, self.roi_mask)
+        guarded = self.guard(mask)
         t1 = clock()
         undistort_before = self.mapper.spent_ns
-        measurements = self.measurer(frame, self.segmenter.reference, mask)
+        measurements = self.measurer(frame, self.segmenter.reference, guarded.mask)
+        if guarded.at_edge:
+            # A blob reaching the edge of the region of interest may go on outside it: clipped.
+            measurements = [dataclasses.replace(m, clipped=True) if m.bbox_px in guarded.at_edge else m
+                            for m in measurements]
         t2 = clock()
         objects = self.tracker.step(measurements, t_ns)
         t3 = clock()
         undistort = self.mapper.spent_ns - undistort_before
         self.stage_ns.update(segment=t1 - t0, undistort=undistort, measure=t2 - t1 - undistort, track=t3 - t2)
-        return FrameResult(index, t_ns, objects, tuple(measurements))
+        return FrameResult(index, t_ns, objects, tuple(measurements), belt_mm_s=belt,
+                           scene_fault=guarded.scene_fault)
+
+    def _belt_motion(self, frame: np.ndarray, t_ns: int) -> tuple[float, float] | None:
+        """The belt's velocity (mm/s, world frame) from its shift since the last frame; None when not measured."""
+        if self.motion is None:
+            return None
+        dx, dy = self.motion(frame)
+        self.segmenter.shift_px = (dx, dy)
+        self.segmenter.duplicate = self.motion.duplicate
+        if self.motion.duplicate:
+            return self._belt_mm_s  # not a new view of the belt: its last velocity holds
+        last, self._last_t_ns = self._last_t_ns, t_ns
+        if last is not None and t_ns > last:
+            a, b = self.mapper.to_mm(np.array([self._roi_centre_px, self._roi_centre_px + (dx, dy)]))
+            dt_s = (t_ns - last) / 1e9
+            self._belt_mm_s = (float(b[0] - a[0]) / dt_s, float(b[1] - a[1]) / dt_s)
+        return self._belt_mm_s

@@ -65,10 +65,18 @@ class FrameResult:
     t_ns: int
     objects: tuple[TrackedObject, ...]
     measurements: tuple[Measurement, ...] = ()
+    # The belt's velocity (mm/s, world frame) measured from the images; None where not measured.
+    belt_mm_s: tuple[float, float] | None = None
+    # The foreground covered most of the region of interest: nothing was measured (fault 5).
+    scene_fault: bool = False
 
     def to_dict(self) -> dict:
-        return {"frame": self.frame, "t": round(self.t_ns / 1e9, _T_DECIMALS),
-                "objects": [o.to_dict() for o in self.objects]}
+        out = {"frame": self.frame, "t": round(self.t_ns / 1e9, _T_DECIMALS),
+               "objects": [o.to_dict() for o in self.objects]}
+        if self.belt_mm_s is not None:
+            vx, vy = self.belt_mm_s
+            out["belt"] = {"vx_mm_s": round(vx, _MM_DECIMALS), "vy_mm_s": round(vy, _MM_DECIMALS)}
+        return out
 
     def to_json_line(self) -> str:
         return json.dumps(self.to_dict(), allow_nan=False, separators=(", ", ": ")) + "\n"

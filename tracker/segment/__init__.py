@@ -1,0 +1,33 @@
+"""Segmentation: frame in, foreground mask out, with ``reference`` the expected empty belt.
+
+Two belt models behind one interface (``segment.model`` in the configuration):
+``reference`` (reference.py) for belts whose look stays put, exact to sub-pixel edges;
+``textured`` (textured.py) for real belts whose texture moves with the parts. Around
+them: the region of interest (roi.py), the belt's motion (motion.py) and the clutter
+guard (guard.py).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from tracker.config import SegmentConfig
+from tracker.segment.reference import Segmenter
+from tracker.segment.textured import TexturedSegmenter
+
+__all__ = ["BeltModel", "Segmenter", "TexturedSegmenter", "make_segmenter"]
+
+
+class BeltModel(Protocol):
+    # Expected empty-belt image (float32, frame size) for sub-pixel edges; None before the first frame.
+    reference: np.ndarray | None
+
+    def __call__(self, frame: np.ndarray) -> np.ndarray: ...
+
+
+def make_segmenter(config: SegmentConfig, roi: np.ndarray) -> BeltModel:
+    if config.model == "textured":
+        return TexturedSegmenter(config, roi)
+    return Segmenter(config)
