@@ -53,6 +53,10 @@ class SegmentConfig:
     # Textured model: learning rate of the belt's per-pixel mean and variance per pixel of belt
     # travel (a stopped belt or a duplicate frame brings no new belt, so it teaches nothing).
     textured_rate: float = 0.04
+    # Textured model: the narrowest part's width on the belt (mm); foreground thinner than this is a
+    # streak, seam or mark across the belt. 0: only what the working image cannot resolve (~2 % of
+    # the frame's long side) is thin.
+    min_part_mm: float = 0.0
 
     def __post_init__(self) -> None:
         _positive(self, "diff_threshold", "motion_threshold", "background_every",
@@ -68,6 +72,8 @@ class SegmentConfig:
             object.__setattr__(self, name, tuple(tuple(float(v) for v in p) for p in getattr(self, name)))
         if not 0 < self.scene_fault_fraction <= 1:
             raise BadInput(f"segment.scene_fault_fraction: expected 0 < f <= 1, got {self.scene_fault_fraction}")
+        if self.min_part_mm < 0:
+            raise BadInput(f"segment.min_part_mm: expected >= 0, got {self.min_part_mm}")
         if not 0 < self.textured_rate <= 1:
             raise BadInput(f"segment.textured_rate: expected 0 < rate <= 1, got {self.textured_rate}")
         if self.absorb_after_frames > 255 * self.background_every:

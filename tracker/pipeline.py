@@ -37,7 +37,7 @@ class Pipeline:
         self.roi_px = roi_polygon_px(seg, calibration)
         roi = roi_mask(self.roi_px, calibration.size)
         self.roi_mask = None if self.roi_px is None else roi
-        self.segmenter = make_segmenter(seg, roi)
+        self.segmenter = make_segmenter(seg, roi, calibration.mm_per_px_at_centre())
         self.mapper = mapper = BeltMapper(calibration, self.config.measure.part_height_mm)
         self.measurer = Measurer(mapper, self.config.measure)
         # The belt's own motion is measured where the belt model needs it (textured belts).
@@ -48,8 +48,10 @@ class Pipeline:
         self._belt_mm_s = (0.0, 0.0)
         # The measurement's own cheap pre-filter (half the smallest part's area anywhere in view).
         min_area_px = 0.5 * self.config.measure.min_area_mm2 / mapper.max_mm_per_px() ** 2
+        # Blobs this close to the region's edge are clipped (the measurement itself checks the image's).
+        edge_px = self.config.measure.border_margin_px + getattr(self.segmenter, "edge_px", 0)
         self.guard = ClutterGuard(roi, seg.scene_fault_fraction, seg.max_blobs, min_area_px,
-                                  self.config.measure.border_margin_px)
+                                  edge_px if self.roi_px is not None or seg.model == "textured" else 0)
         outline = mapper.view_outline_mm().astype(np.float32)
         self.tracker = Tracker(self.config.track, lambda x, y: cv2.pointPolygonTest(outline, (x, y), False) >= 0)
         # Time spent per stage on the last frame (ns); for the status line and the benchmark only.

@@ -86,7 +86,10 @@ class Tracker:
             for mi, m in enumerate(measurements):
                 d = math.dist(track.position, (m.rect.x_mm, m.rect.y_mm))
                 # A clipped blob's centre is off the part's: allow for half the part.
-                gate = cfg.gate_mm + (float(track.kf.x[LENGTH, 0]) / 2 if m.clipped else 0.0)
+                # A centroid inside the predicted part (half its width) is that part whatever its size:
+                # parts lie flat and apart, so no other part's centroid can be there.
+                gate = max(cfg.gate_mm, float(track.kf.x[WIDTH, 0]) / 2)
+                gate += float(track.kf.x[LENGTH, 0]) / 2 if m.clipped else 0.0
                 if d <= gate:
                     pairs.append((d, ti, mi))
         pairs.sort()

@@ -27,7 +27,9 @@ class BeltModel(Protocol):
     def __call__(self, frame: np.ndarray) -> np.ndarray: ...
 
 
-def make_segmenter(config: SegmentConfig, roi: np.ndarray) -> BeltModel:
+def make_segmenter(config: SegmentConfig, roi: np.ndarray, mm_per_px: float = 1.0) -> BeltModel:
+    """The configured belt model; ``roi`` is the region of interest (uint8 mask), ``mm_per_px`` the
+    belt's scale at the image centre."""
     if config.model == "textured":
-        return TexturedSegmenter(config, roi)
+        return TexturedSegmenter(config, roi, mm_per_px)
     return Segmenter(config)

@@ -31,12 +31,13 @@ class ClutterGuard:
         self._fault_fraction = fault_fraction
         self._max_blobs = max_blobs
         self._min_area_px = min_area_px
-        whole = cv2.countNonZero(roi) == roi.size
-        # The band just inside the region's edge: a blob reaching it may go on outside (clipped).
+        # The band just inside the region's edge (the image's border included): a blob reaching it
+        # may go on outside, so it is clipped. None (edge_px 0): the measurement's own border check only.
         self._edge = None
-        if not whole:
+        if edge_px > 0:
             kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * edge_px + 1,) * 2)
-            self._edge = cv2.bitwise_and(roi, cv2.bitwise_not(cv2.erode(roi, kernel)))
+            inner = cv2.erode(roi, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+            self._edge = cv2.bitwise_and(roi, cv2.bitwise_not(inner))
 
     def __call__(self, mask: np.ndarray) -> Guarded:
         if cv2.countNonZero(mask) > self._fault_fraction * self._roi_area:

@@ -35,12 +35,20 @@ _MIN_STEP = 0.1
 _GHOST_FRACTION = 0.5
 # Radius (working pixels) within which the strongest contrast sets what is half of it.
 _NEAR_WORK_PX = 6
+# Working pixels along the region's edge that the smoothing blends with what lies outside it.
+_EDGE_WORK_PX = 4
 # Parts are at least this thick (working pixels, ~2 % of the long side): thinner is a streak.
 _MIN_PART_WORK_PX = 5
 # The belt's gain is followed only while at least this fraction of the working image shows belt.
 _MIN_BELT_FRACTION = 0.1
 # Blobs smaller than this (working pixels) are specks, not parts: never outlined.
 _MIN_BLOB_WORK_PX = 6
+# A blob is stationary (scenery, not a part) when the belt travelled at least this far (working
+# pixels) since the last frame and the blob matches the last frame in place this much better than
+# moved along with the belt; it is then learnt at this rate per frame.
+_STATIONARY_TRAVEL_WORK_PX = 0.5
+_STATIONARY_RATIO = 0.5
+_STATIONARY_RATE = 0.2
 # A blob's own contrast: this percentile of its |level - belt| (its body, not its blurred rim).
 _BLOB_LEVEL_PERCENTILE = 90
 
@@ -48,7 +56,7 @@ _BLOB_LEVEL_PERCENTILE = 90
 class TexturedSegmenter:
     """Frame in, foreground mask out; ``reference`` is the expected empty belt (float32, full size)."""
 
-    def __init__(self, config: SegmentConfig, roi: np.ndarray) -> None:
+    def __init__(self, config: SegmentConfig, roi: np.ndarray, mm_per_px: float = 1.0) -> None:
         self.config = config
         h, w = roi.shape
         self._size = (w, h)
@@ -60,12 +68,17 @@ class TexturedSegmenter:
         _, self._roi_small = cv2.threshold(self._roi_small, 0, 255, cv2.THRESH_BINARY)
         self._kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (3, 3))
         # Foreground thinner than this (working pixels) is a streak or seam across the belt, no part.
-        self._thin = cv2.getStructuringElement(cv2.MORPH_RECT, (_MIN_PART_WORK_PX,) * 2)
+        thin = max(_MIN_PART_WORK_PX, int(config.min_part_mm / mm_per_px * self._scale))
+        self._thin = cv2.getStructuringElement(cv2.MORPH_RECT, (thin, thin))
+        # A blob within this many pixels of the region's edge reaches it: it may go on outside and
+        # is clipped (the smoothing blends what lies outside into the region's last working pixels).
+        self.edge_px = int(np.ceil(_EDGE_WORK_PX / self._scale))
         # "Near" a pixel for its peak contrast: a shadow or glow this close to a part is judged against it.
         self._near = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * _NEAR_WORK_PX + 1,) * 2)
         # One working pixel, at full resolution: how far a hull may grow to the half-contrast edge.
         self._band = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * round(1 / self._scale) + 1,) * 2)
         self.mean: np.ndarray | None = None
+        self._prev: np.ndarray | None = None
         # Working pixels of the last frame that showed plain belt (far from any foreground).
         self._belt = self._roi_small
         self.var: np.ndarray | None = None
@@ -124,7 +137,8 @@ class TexturedSegmenter:
             return mask
         peak = cv2.dilate(contrast, self._near)
         strong = cv2.bitwise_and(fg, cv2.compare(contrast, 0.5 * peak, cv2.CMP_GE))
-        strong = cv2.morphologyEx(strong, cv2.MORPH_CLOSE, self._kernel)
+        # Gaps narrower than the narrowest part are inside one (a display, a fold, a print).
+        strong = cv2.morphologyEx(strong, cv2.MORPH_CLOSE, self._thin)
         n, labels, stats, _ = cv2.connectedComponentsWithStats(strong, connectivity=8)
         full = None
         scale = self._scale
@@ -155,15 +169,13 @@ class TexturedSegmenter:
     def _start(self, small: np.ndarray) -> None:
         """First frame: the belt runs along the region's long side, so each line along it is mostly
         belt, whatever lies on it (parts, a sheet): the belt's level across it is that line's median.
-        Static structure and shading the frame shows close to that level are taken from the frame."""
+        Structure that stays put while the belt moves is learnt as it shows itself (``_stationary``)."""
         roi = self._roi_small > 0
         along_rows = np.count_nonzero(roi.any(axis=0)) >= np.count_nonzero(roi.any(axis=1))
         # Outside the region: the region's overall median, so that lines leaving it are still defined.
         values = np.where(roi, small, np.median(small[roi]))
         profile = np.median(values, axis=1 if along_rows else 0, keepdims=True) + np.zeros_like(small)
         self.mean = profile.astype(np.float32)
-        near = np.abs(small - self.mean) <= self.config.textured_threshold
-        self.mean[near] = small[near]
         self.var = np.full_like(self.mean, (self.config.textured_threshold / self.config.textured_sigmas) ** 2)
 
     def _follow_exposure(self, small: np.ndarray) -> None:
@@ -188,14 +200,22 @@ class TexturedSegmenter:
         cv2.accumulateWeighted(cv2.multiply(diff, diff), self.var, rate, mask=learn)
 
     def _absorb_ghosts(self, small: np.ndarray, fg: np.ndarray) -> np.ndarray:
-        """Blobs that are ghosts join the belt at once; returns their mask."""
+        """Blobs that are ghosts join the belt at once, blobs that stay put while the belt moves
+        join it quickly; returns the mask of the ghosts."""
         ghosts = np.zeros_like(fg)
+        prev, self._prev = self._prev, small
         n, labels, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8)
         if n <= 1:
             return ghosts
         floor = self.config.textured_threshold
         h, w = fg.shape
-        for i in range(1, n):
+        dx, dy = (self._scale * d for d in self.shift_px)
+        moved = None
+        if prev is not None and not self.duplicate and np.hypot(dx, dy) >= _STATIONARY_TRAVEL_WORK_PX:
+            # The last frame moved along with the belt: what rides on the belt matches it, not ``prev``.
+            moved = cv2.warpAffine(prev, np.float32([[1, 0, dx], [0, 1, dy]]), (w, h), borderMode=cv2.BORDER_REPLICATE)
+        order = np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable")[: 2 * self.config.max_blobs] + 1
+        for i in order:
             x, y, bw, bh, _ = stats[i]
             x0, y0, x1, y1 = max(0, x - 2), max(0, y - 2), min(w, x + bw + 2), min(h, y + bh + 2)
             blob = (labels[y0:y1, x0:x1] == i).astype(np.uint8) * 255
@@ -209,4 +229,10 @@ class TexturedSegmenter:
             if spread < _GHOST_FRACTION * floor:
                 cv2.copyTo(img, blob, self.mean[y0:y1, x0:x1])
                 ghosts[y0:y1, x0:x1] |= blob
+            elif moved is not None:
+                still = cv2.mean(cv2.absdiff(img, prev[y0:y1, x0:x1]), mask=blob)[0]
+                riding = cv2.mean(cv2.absdiff(img, moved[y0:y1, x0:x1]), mask=blob)[0]
+                if still < _STATIONARY_RATIO * riding:
+                    # Rails, glare, a floor or rollers: belt scenery, not a part.
+                    cv2.accumulateWeighted(img, self.mean[y0:y1, x0:x1], _STATIONARY_RATE, mask=blob)
         return ghosts
