@@ -46,11 +46,9 @@ class Pipeline:
         self._roi_centre_px = self._roi_centre_px[:2] + self._roi_centre_px[2:] / 2
         self._last_t_ns: int | None = None
         self._belt_mm_s = (0.0, 0.0)
-        # The measurement's own cheap pre-filter (half the smallest part's area anywhere in view).
-        min_area_px = 0.5 * self.config.measure.min_area_mm2 / mapper.max_mm_per_px() ** 2
         # Blobs this close to the region's edge are clipped (the measurement itself checks the image's).
         edge_px = self.config.measure.border_margin_px + getattr(self.segmenter, "edge_px", 0)
-        self.guard = ClutterGuard(roi, seg.scene_fault_fraction, seg.max_blobs, min_area_px,
+        self.guard = ClutterGuard(roi, seg.scene_fault_fraction, seg.max_blobs,
                                   edge_px if self.roi_px is not None or seg.model == "textured" else 0)
         outline = mapper.view_outline_mm().astype(np.float32)
         self.tracker = Tracker(self.config.track, lambda x, y: cv2.pointPolygonTest(outline, (x, y), False) >= 0)

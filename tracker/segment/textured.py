@@ -46,7 +46,7 @@ _MIN_BLOB_WORK_PX = 6
 # A blob is stationary (scenery, not a part) when the belt travelled at least this far (working
 # pixels) since the last frame and the blob matches the last frame in place this much better than
 # moved along with the belt; it is then learnt at this rate per frame.
-_STATIONARY_TRAVEL_WORK_PX = 0.5
+_STATIONARY_TRAVEL_WORK_PX = 0.25
 _STATIONARY_RATIO = 0.5
 _STATIONARY_RATE = 0.2
 # A blob's own contrast: this percentile of its |level - belt| (its body, not its blurred rim).
@@ -82,18 +82,16 @@ class TexturedSegmenter:
         # Working pixels of the last frame that showed plain belt (far from any foreground).
         self._belt = self._roi_small
         self.var: np.ndarray | None = None
-        self._reference: np.ndarray | None = None
         # The belt's travel since the last frame (image pixels) and whether the frame repeats the
         # one before; set by the pipeline from the belt's measured motion before each frame.
         self.shift_px = (0.0, 0.0)
         self.duplicate = False
 
     @property
-    def reference(self) -> np.ndarray | None:
-        """The belt's mean level at full resolution (float32), built only when measurement asks."""
-        if self._reference is None and self.mean is not None:
-            self._reference = cv2.resize(self.mean, self._size, interpolation=cv2.INTER_LINEAR)
-        return self._reference
+    def reference(self) -> UpsampledView | None:
+        """The belt's mean level at full resolution (float32), indexable like the full image; only
+        the pieces measurement reads (around each blob) are ever computed."""
+        return None if self.mean is None else UpsampledView(self.mean, self._size, self._scale)
 
     def _smooth(self, frame: np.ndarray) -> np.ndarray:
         small = cv2.resize(frame, self._work, interpolation=cv2.INTER_AREA).astype(np.float32)
@@ -102,7 +100,6 @@ class TexturedSegmenter:
     def __call__(self, frame: np.ndarray) -> np.ndarray:
         cfg = self.config
         small = self._smooth(frame)
-        self._reference = None
         if self.mean is None:
             self._start(small)
         else:
@@ -113,8 +110,11 @@ class TexturedSegmenter:
         limit = np.maximum(cfg.textured_sigmas * np.sqrt(self.var), cfg.textured_threshold)
         fg = cv2.bitwise_and(cv2.compare(contrast, limit, cv2.CMP_GT), self._roi_small)
         fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, self._kernel)
-        # Everything unlike the belt (shadows and reflections included) is kept from learning.
-        self._learn(small, diff, fg)
+        # Everything unlike the belt (shadows and reflections included) is kept from learning,
+        # unless nearly everything is unlike it: then the model is wrong (light switched on, camera
+        # moved), not the belt covered, and it learns the scene anew.
+        lost = cv2.countNonZero(fg) > self.config.scene_fault_fraction * cv2.countNonZero(self._roi_small)
+        self._learn(small, diff, np.zeros_like(fg) if lost else fg)
         self._belt = cv2.bitwise_and(cv2.bitwise_not(cv2.dilate(fg, self._near)), self._roi_small)
         ghosts = self._absorb_ghosts(small, fg)
         # Open: thin streaks and seams across the belt are no parts.
@@ -140,7 +140,7 @@ class TexturedSegmenter:
         # Gaps narrower than the narrowest part are inside one (a display, a fold, a print).
         strong = cv2.morphologyEx(strong, cv2.MORPH_CLOSE, self._thin)
         n, labels, stats, _ = cv2.connectedComponentsWithStats(strong, connectivity=8)
-        full = None
+        full = UpsampledView(contrast, self._size, self._scale)
         scale = self._scale
         order = np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable")[: self.config.max_blobs] + 1
         for i in order:
@@ -156,8 +156,6 @@ class TexturedSegmenter:
             x0, y0 = np.floor(hull.min(axis=0) - 1.5 / scale).astype(int)
             x1, y1 = np.ceil(hull.max(axis=0) + 1.5 / scale).astype(int)
             x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w, x1 + 1), min(h, y1 + 1)
-            if full is None:
-                full = cv2.resize(contrast, self._size, interpolation=cv2.INTER_LINEAR)
             poly = np.round(hull - (x0, y0)).astype(np.int32)
             blob = np.zeros((y1 - y0, x1 - x0), np.uint8)
             cv2.fillConvexPoly(blob, poly, 255)
@@ -174,9 +172,14 @@ class TexturedSegmenter:
         along_rows = np.count_nonzero(roi.any(axis=0)) >= np.count_nonzero(roi.any(axis=1))
         # Outside the region: the region's overall median, so that lines leaving it are still defined.
         values = np.where(roi, small, np.median(small[roi]))
-        profile = np.median(values, axis=1 if along_rows else 0, keepdims=True) + np.zeros_like(small)
-        self.mean = profile.astype(np.float32)
-        self.var = np.full_like(self.mean, (self.config.textured_threshold / self.config.textured_sigmas) ** 2)
+        axis = 1 if along_rows else 0
+        profile = np.median(values, axis=axis, keepdims=True)
+        # The belt's spread along each line (a robust sigma: 1.4826 x the median absolute deviation):
+        # a belt of rollers or bold stripes passes by with a large one, a plain belt with the floor.
+        sigma = 1.4826 * np.median(np.abs(values - profile), axis=axis, keepdims=True)
+        floor = self.config.textured_threshold / self.config.textured_sigmas
+        self.mean = (profile + np.zeros_like(small)).astype(np.float32)
+        self.var = (np.maximum(sigma, floor) ** 2 + np.zeros_like(small)).astype(np.float32)
 
     def _follow_exposure(self, small: np.ndarray) -> None:
         """A camera's automatic exposure (or the light) changes the whole belt's level at once,
@@ -236,3 +239,26 @@ class TexturedSegmenter:
                     # Rails, glare, a floor or rollers: belt scenery, not a part.
                     cv2.accumulateWeighted(img, self.mean[y0:y1, x0:x1], _STATIONARY_RATE, mask=blob)
         return ghosts
+
+
+class UpsampledView:
+    """A small image seen at full resolution (bilinear, as ``cv2.resize`` would scale it up),
+    computed only for the slices asked for: ``view[y0:y1, x0:x1]`` is a float32 array."""
+
+    def __init__(self, small: np.ndarray, size: tuple[int, int], scale: float) -> None:
+        self._small = small
+        self._scale = scale
+        self.shape = (size[1], size[0])
+
+    def __getitem__(self, key: tuple[slice, slice]) -> np.ndarray:
+        rows, cols = key
+        y0, y1, _ = rows.indices(self.shape[0])
+        x0, x1, _ = cols.indices(self.shape[1])
+        s = self._scale
+        # Full pixel centre (x + 0.5) sits at (x + 0.5) * s - 0.5 in the small image.
+        m = np.float32([[s, 0, (x0 + 0.5) * s - 0.5], [0, s, (y0 + 0.5) * s - 0.5]])
+        return cv2.warpAffine(self._small, m, (max(0, x1 - x0), max(0, y1 - y0)),
+                              flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+
+    def full(self) -> np.ndarray:
+        return self[0 : self.shape[0], 0 : self.shape[1]]
