@@ -51,7 +51,12 @@ class Pipeline:
         self.guard = ClutterGuard(roi, seg.scene_fault_fraction, seg.max_blobs,
                                   edge_px if self.roi_px is not None or seg.model == "textured" else 0)
         outline = mapper.view_outline_mm().astype(np.float32)
-        self.tracker = Tracker(self.config.track, lambda x, y: cv2.pointPolygonTest(outline, (x, y), False) >= 0)
+        # Where the belt has carried a point since the start (mm, world frame). With the belt's motion
+        # measured, parts are tracked on the belt, where a part riding it stands still through the
+        # belt's stops, slow phases and duplicate frames; without it the offset stays zero.
+        self._belt_offset_mm = np.zeros(2)
+        self.tracker = Tracker(self.config.track, lambda x, y: cv2.pointPolygonTest(
+            outline, (x + self._belt_offset_mm[0], y + self._belt_offset_mm[1]), False) >= 0)
         # Time spent per stage on the last frame (ns); for the status line and the benchmark only.
         self.stage_ns = dict.fromkeys(STAGES, 0)
 
@@ -71,12 +76,25 @@ class Pipeline:
             measurements = [dataclasses.replace(m, clipped=True) if m.bbox_px in guarded.at_edge else m
                             for m in measurements]
         t2 = clock()
-        objects = self.tracker.step(measurements, t_ns)
+        objects = self._track(measurements, t_ns, belt)
         t3 = clock()
         undistort = self.mapper.spent_ns - undistort_before
         self.stage_ns.update(segment=t1 - t0, undistort=undistort, measure=t2 - t1 - undistort, track=t3 - t2)
         return FrameResult(index, t_ns, objects, tuple(measurements), belt_mm_s=belt,
                            scene_fault=guarded.scene_fault)
+
+    def _track(self, measurements: list, t_ns: int, belt: tuple[float, float] | None) -> tuple:
+        if belt is None:
+            return self.tracker.step(measurements, t_ns)
+        ox, oy = self._belt_offset_mm
+        on_belt = [dataclasses.replace(m, rect=dataclasses.replace(m.rect, x_mm=m.rect.x_mm - ox,
+                                                                   y_mm=m.rect.y_mm - oy)) for m in measurements]
+        raw = {id(b): m for b, m in zip(on_belt, measurements, strict=True)}
+        return tuple(
+            dataclasses.replace(o, x_mm=o.x_mm + ox, y_mm=o.y_mm + oy, corners_mm=o.corners_mm + (ox, oy),
+                                vx_mm_s=o.vx_mm_s + belt[0], vy_mm_s=o.vy_mm_s + belt[1],
+                                raw=None if o.raw is None else raw[id(o.raw)])
+            for o in self.tracker.step(on_belt, t_ns))
 
     def _belt_motion(self, frame: np.ndarray, t_ns: int) -> tuple[float, float] | None:
         """The belt's velocity (mm/s, world frame) from its shift since the last frame; None when not measured."""
@@ -92,4 +110,5 @@ class Pipeline:
             a, b = self.mapper.to_mm(np.array([self._roi_centre_px, self._roi_centre_px + (dx, dy)]))
             dt_s = (t_ns - last) / 1e9
             self._belt_mm_s = (float(b[0] - a[0]) / dt_s, float(b[1] - a[1]) / dt_s)
+            self._belt_offset_mm = self._belt_offset_mm + (b - a)
         return self._belt_mm_s

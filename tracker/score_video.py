@@ -28,6 +28,9 @@ from tracker.poses import FrameResult
 from tracker.synthetic import CameraSpec
 
 PHANTOM_MEASUREMENTS = 10
+# Tracked on the belt (its motion measured), a part riding it hardly accelerates: a tenth of the
+# default, which must allow for a belt starting and stopping.
+_ON_BELT_ACCEL_MM_S2 = 200.0
 # Frames either side of a part's labelled frame in which a track may show it (labels are +-3 frames).
 _MATCH_FRAMES = 4
 # The labelled box is grown by this fraction of its size (a centroid on the box's edge still matches).
@@ -58,7 +61,8 @@ class RealVideo:
         px = self.mm_per_px
         return TrackerConfig(
             segment=SegmentConfig(model="textured", roi_px=self.roi_px, min_part_mm=self.min_part_mm),
-            track=TrackConfig(position_sigma_mm=px, size_sigma_mm=px, angle_sigma_deg=1.0))
+            track=TrackConfig(position_sigma_mm=px, size_sigma_mm=px, angle_sigma_deg=1.0,
+                              accel_sigma_mm_s2=_ON_BELT_ACCEL_MM_S2))
 
 
 # The belt areas are each camera's one-time setting: between the side rails; the picture
