@@ -128,7 +128,7 @@ class Tracker:
     def _inside_known(self, m: Measurement, tracks: list[Track], measurements: list[Measurement]) -> bool:
         """Whether the blob is a piece of a known part rather than a new one: its centre lies within a
         tracked part (half its length from its centre), or next to a part running out of view (within
-        half the gate of a clipped blob's rectangle). Parts lie flat and apart, so such a blob is a
+        the gate of a clipped blob's rectangle). Parts lie flat and apart, so such a blob is a
         fragment, or the rest of a part tipping off the belt's end."""
         for track in tracks:
             reach = max(self.config.gate_mm, float(track.kf.x[LENGTH, 0]) / 2)
@@ -138,6 +138,6 @@ class Tracker:
             if other.clipped:
                 r = other.rect
                 corners = rectangle_corners(r.x_mm, r.y_mm, r.angle_deg, r.length_mm, r.width_mm).astype(np.float32)
-                if cv2.pointPolygonTest(corners, (m.rect.x_mm, m.rect.y_mm), True) >= -self.config.gate_mm / 2:
+                if cv2.pointPolygonTest(corners, (m.rect.x_mm, m.rect.y_mm), True) >= -self.config.gate_mm:
                     return True
         return False

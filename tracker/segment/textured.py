@@ -117,7 +117,7 @@ class TexturedSegmenter:
         self._learn(small, diff, np.zeros_like(fg) if lost else fg)
         self._belt = cv2.bitwise_and(cv2.bitwise_not(cv2.dilate(fg, self._near)), self._roi_small)
         ghosts = self._absorb_ghosts(small, fg)
-        # Open: thin streaks and seams across the belt are no parts.
+        # Open: thin streaks, seams and edges across the belt are no parts.
         fg = cv2.morphologyEx(cv2.bitwise_and(fg, cv2.bitwise_not(ghosts)), cv2.MORPH_OPEN, self._thin)
         return cv2.bitwise_and(self._outline(contrast, fg), self._roi)
 
