@@ -135,7 +135,8 @@ class TrackerConfig:
     track: TrackConfig = field(default_factory=TrackConfig)
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """Plain JSON values (polygons as lists), so a round trip through a file compares equal."""
+        return _json_ready(asdict(self))
 
     @classmethod
     def from_dict(cls, data: object) -> TrackerConfig:
@@ -201,3 +202,11 @@ def _check_polygon(name: str, points: object) -> None:
                   for p in points))
     if not ok:
         raise BadInput(f"{name}: expected a polygon of >= 3 [x, y] number pairs, got {points!r}")
+
+
+def _json_ready(value: object) -> object:
+    if isinstance(value, dict):
+        return {k: _json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_ready(v) for v in value]
+    return value

@@ -16,7 +16,7 @@ from typing import Protocol, TextIO
 import numpy as np
 
 from tracker.errors import FrameSizeError, SourceLost, TrackerError
-from tracker.health import FAULT_CAMERA_LOST, FAULT_FRAME_SIZE, FAULT_OVERRUN, Health
+from tracker.health import FAULT_CAMERA_LOST, FAULT_FRAME_SIZE, FAULT_OVERRUN, FAULT_SCENE, FAULT_TEXT, Health
 from tracker.pipeline import Pipeline
 from tracker.poses import FrameResult, PoseWriter
 from tracker.sources import Frame, FrameSource
@@ -59,6 +59,8 @@ class RunSummary:
     loop_ms_p50: float = 0.0
     loop_ms_p99: float = 0.0
     overruns: int = 0
+    # Frames whose foreground covered most of the region of interest (nothing measured in them).
+    scene_faults: int = 0
     stopped_by: str = "end of source"
 
     def line(self) -> str:
@@ -67,8 +69,11 @@ class RunSummary:
         return (
             f"{self.frames} frames in {self.seconds:.2f} s ({fps:.1f} fps), {parts} tracked, "
             f"{self.measured} measurements, loop p50 {self.loop_ms_p50:.2f} ms p99 {self.loop_ms_p99:.2f} ms, "
-            f"{self.overruns} overruns; stopped by {self.stopped_by}"
+            f"{self.overruns} overruns{self._scene()}; stopped by {self.stopped_by}"
         )
+
+    def _scene(self) -> str:
+        return f", {self.scene_faults} frames with the scene not understood" if self.scene_faults else ""
 
 
 class StatusLine:
@@ -103,7 +108,17 @@ class StatusLine:
             self._out.flush()
 
 
+def describe_belt(result: FrameResult) -> str:
+    """The belt's measured velocity for the status line ("" when not measured)."""
+    if result.belt_mm_s is None:
+        return ""
+    vx, vy = result.belt_mm_s
+    return f"belt {vx:+.0f},{vy:+.0f} mm/s"
+
+
 def describe(result: FrameResult) -> str:
+    if result.scene_fault:
+        return f"FAULT {FAULT_SCENE}: {FAULT_TEXT[FAULT_SCENE]}"
     if not result.objects:
         return "no part"
     o = result.objects[0]
@@ -142,6 +157,14 @@ class Runner:
                 health.overruns = self.source.overruns
                 if self.source.overruns:
                     health.set_fault(FAULT_OVERRUN)
+                if result.scene_fault:
+                    health.set_fault(FAULT_SCENE)
+                    if not summary.scene_faults:
+                        log.warning("%s frame %d: scene not understood: the foreground covers most of the region "
+                                    "of interest (fault %d); nothing is tracked while it lasts. Check the light, "
+                                    "the camera's position and segment settings (model, roi).",
+                                    self.source.name, frame.index, FAULT_SCENE)
+                    summary.scene_faults += 1
                 for sink in self.sinks:
                     sink.submit(frame, result)
                 this_loop_ns = time.perf_counter_ns() - t0
@@ -156,6 +179,7 @@ class Runner:
                 if self.status and self.status.due():
                     parts = [f"frame {frame.index}", f"{fps:.0f} fps", f"loop {this_loop_ns / 1e6:.2f} ms",
                              f"objects {len(result.objects)}", describe(result)]
+                    parts += [b for b in (describe_belt(result),) if b]
                     parts += [s for s in (sink.status() for sink in self.sinks) if s]
                     if self.source.overruns:
                         parts.append(f"overruns {self.source.overruns}")
