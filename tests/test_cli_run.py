@@ -29,7 +29,7 @@ def test_run_writes_the_contract_pose_stream(scene_dir, tmp_path):
     for index, line in enumerate(lines):
         # No NaN/Infinity: strict JSON parsing rejects them.
         pose = json.loads(line, parse_constant=lambda c: pytest.fail(f"non-finite {c}"))
-        assert list(pose) == ["frame", "t", "objects", "belt"] and pose["frame"] == index
+        assert list(pose) == ["frame", "t", "objects"] and pose["frame"] == index
         assert pose["t"] == pytest.approx(index / 30.0, abs=1e-9)
         for obj in pose["objects"]:
             assert list(obj) == ["id", "x_mm", "y_mm", "angle_deg", "length_mm", "width_mm", "corners_mm",

@@ -6,11 +6,12 @@ same pipeline with ``TrackerConfig.from_dict``.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass, field, fields
 
 from tracker.errors import BadInput
+
+SEGMENT_MODELS = ("reference", "textured")
 
 
 @dataclass(frozen=True)
@@ -28,50 +29,58 @@ class SegmentConfig:
     absorb_after_frames: int = 90
     # Side of the square opening kernel that removes noise speckles from the mask.
     open_kernel_px: int = 3
-    # Side of the square closing kernel that joins the pieces of one part (a phone's dark screen
-    # in its light frame differs from the belt in both directions; between, the blur may not).
-    # Parts closer than this are one blob.
-    close_kernel_px: int = 9
-    # Box blur (px, odd) applied to differences before thresholding: a belt's fine texture
-    # (knurl, weave, mottling) moves with the belt and must average out; parts, far larger than
-    # its period, keep their level. 1 turns it off; 0 (auto) uses texture_blur_auto_px when the
-    # first frame's belt has fine texture (its high-pass spread exceeds texture_spread), else 1.
-    texture_blur_px: int = 0
-    texture_blur_auto_px: int = 9
-    texture_spread: float = 4.0
-    # Belt motion is measured on the region of interest reduced by this factor (phase correlation).
-    motion_reduce: int = 4
-    # Below this shift (px per frame) the belt is standing: nothing is absorbed into the
-    # reference, so parts that stop with the belt stay parts.
-    belt_still_px: float = 0.3
-    # The region of interest: an image polygon [[x, y], ...] in pixels, or a belt polygon in mm
-    # (one or neither; none: the whole image). Outside it nothing is a part.
+    # Belt model: "reference" (a per-pixel image of the empty belt: exact on plain belts whose
+    # look does not move) or "textured" (real belts whose texture, streaks and seams move with
+    # the parts: texture-suppressed levels against per-pixel statistics of the passing belt).
+    model: str = "reference"
+    # Region of interest, set once: the belt area as an image polygon [[x, y], ...] (pixels) or a
+    # belt polygon (mm, world frame); outside it nothing is a part. Empty: the whole image.
     roi_px: tuple = ()
     roi_mm: tuple = ()
-    # Foreground covering more than this fraction of the region is a scene the tracker does not
-    # understand (light switched on, camera bumped): fault 5, nothing measured...
+    # Foreground covering more than this fraction of the region of interest is not parts but a
+    # changed scene (light switched on, camera bumped, wrong settings): fault 5, nothing tracked.
     scene_fault_fraction: float = 0.5
-    # ...and after this many such frames in a row the reference is learnt anew from the frame.
-    relearn_after_frames: int = 30
+    # At most this many blobs (the largest) are measured per frame: work per frame stays bounded.
+    max_blobs: int = 24
+    # Textured model: frames are averaged down to about this many pixels on their long side, which
+    # averages out a belt's fine texture (diamonds, fibres, compression noise) while parts, tens of
+    # pixels across, keep their level.
+    textured_work_px: int = 240
+    # Textured model: foreground where the smoothed level differs from the belt's by more than this
+    # (grey levels) and by more than textured_sigmas standard deviations of the passing belt there.
+    textured_threshold: float = 16.0
+    textured_sigmas: float = 4.0
+    # Textured model: learning rate of the belt's per-pixel mean and variance per pixel of belt
+    # travel (a stopped belt or a duplicate frame brings no new belt, so it teaches nothing).
+    textured_rate: float = 0.04
+    # Textured model: edges are located on frame and reference blurred by this box (px, odd): a box
+    # blur keeps a straight edge's coverage integral, and the belt's texture averages out.
+    textured_edge_blur_px: int = 5
+    # Textured model: the narrowest part's width on the belt (mm); foreground thinner than this is a
+    # streak, seam or mark across the belt. 0: only what the working image cannot resolve (~2 % of
+    # the frame's long side) is thin.
+    min_part_mm: float = 0.0
 
     def __post_init__(self) -> None:
         _positive(self, "diff_threshold", "motion_threshold", "background_every",
-                  "absorb_after_frames", "open_kernel_px", "close_kernel_px", "texture_blur_auto_px",
-                  "texture_spread", "motion_reduce", "belt_still_px", "scene_fault_fraction", "relearn_after_frames")
-        for name in ("texture_blur_px", "texture_blur_auto_px"):
-            value = getattr(self, name)
-            if value < 0 or (value and value % 2 == 0):
-                raise BadInput(f"segment.{name}: expected an odd number of pixels (or 0: auto), got {value}")
+                  "absorb_after_frames", "open_kernel_px", "max_blobs", "textured_work_px",
+                  "textured_threshold", "textured_sigmas", "textured_edge_blur_px")
+        if self.textured_edge_blur_px % 2 == 0:
+            raise BadInput(f"segment.textured_edge_blur_px: expected an odd number, got {self.textured_edge_blur_px}")
+        if self.model not in SEGMENT_MODELS:
+            raise BadInput(f"segment.model: expected one of {list(SEGMENT_MODELS)}, got {self.model!r}")
+        if self.roi_px and self.roi_mm:
+            raise BadInput("segment: expected roi_px or roi_mm, not both")
         for name in ("roi_px", "roi_mm"):
-            # JSON gives lists; keep the frozen configuration hashable.
-            value = getattr(self, name)
-            if not all(isinstance(p, list | tuple) and len(p) == 2 for p in value):
-                raise BadInput(f"segment.{name}: expected a list of [x, y] points, got {value!r}")
-            try:
-                points = tuple(tuple(float(c) for c in p) for p in value)
-            except (TypeError, ValueError):
-                raise BadInput(f"segment.{name}: expected numbers as coordinates, got {value!r}") from None
-            object.__setattr__(self, name, points)
+            _check_polygon(f"segment.{name}", getattr(self, name))
+            # Tuples: the settings stay hashable and compare equal however they were given.
+            object.__setattr__(self, name, tuple(tuple(float(v) for v in p) for p in getattr(self, name)))
+        if not 0 < self.scene_fault_fraction <= 1:
+            raise BadInput(f"segment.scene_fault_fraction: expected 0 < f <= 1, got {self.scene_fault_fraction}")
+        if self.min_part_mm < 0:
+            raise BadInput(f"segment.min_part_mm: expected >= 0, got {self.min_part_mm}")
+        if not 0 < self.textured_rate <= 1:
+            raise BadInput(f"segment.textured_rate: expected 0 < rate <= 1, got {self.textured_rate}")
         if self.absorb_after_frames > 255 * self.background_every:
             raise BadInput(f"absorb_after_frames: expected <= 255 * background_every "
                            f"({255 * self.background_every}), got {self.absorb_after_frames}")
@@ -95,12 +104,9 @@ class MeasureConfig:
     side_band_px: float = 1.5
     # Minimum |part - belt| contrast (grey levels) for a sub-pixel measurement.
     min_contrast: float = 20.0
-    # At most this many blobs (the largest) are measured per frame: clutter cannot make the
-    # loop fall behind the camera.
-    max_blobs: int = 24
 
     def __post_init__(self) -> None:
-        _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "max_blobs")
+        _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
 
@@ -134,8 +140,8 @@ class TrackerConfig:
     track: TrackConfig = field(default_factory=TrackConfig)
 
     def to_dict(self) -> dict:
-        """Plain JSON types (lists, not tuples), so a recorded copy compares equal."""
-        return json.loads(json.dumps(asdict(self)))
+        """Plain JSON values (polygons as lists), so a round trip through a file compares equal."""
+        return _json_ready(asdict(self))
 
     @classmethod
     def from_dict(cls, data: object) -> TrackerConfig:
@@ -190,3 +196,22 @@ def _positive(obj: object, *names: str) -> None:
         value = getattr(obj, name)
         if not value > 0:
             raise BadInput(f"{type(obj).__name__}.{name}: expected > 0, got {value}")
+
+
+def _check_polygon(name: str, points: object) -> None:
+    if not points:
+        return
+    ok = (isinstance(points, list | tuple) and len(points) >= 3
+          and all(isinstance(p, list | tuple) and len(p) == 2
+                  and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in p)
+                  for p in points))
+    if not ok:
+        raise BadInput(f"{name}: expected a polygon of >= 3 [x, y] number pairs, got {points!r}")
+
+
+def _json_ready(value: object) -> object:
+    if isinstance(value, dict):
+        return {k: _json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_ready(v) for v in value]
+    return value

@@ -18,7 +18,6 @@ import numpy as np
 
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
-from tracker.segment.roi import RegionOfInterest
 from tracker.undistort import BeltMapper
 
 # Pixels on each side of a crossing that the coverage sum spans (covers blur up to ~4 px); the
@@ -44,13 +43,13 @@ class Measurement:
 
 
 class Measurer:
-    def __init__(self, mapper: BeltMapper, config: MeasureConfig, roi: RegionOfInterest | None = None) -> None:
+    def __init__(self, mapper: BeltMapper, config: MeasureConfig) -> None:
         self.mapper = mapper
         self.config = config
-        self._roi = roi
         # Half the width of the window each sub-pixel edge is summed over (see HALF_WINDOW_PX).
         self.half_window_px = HALF_WINDOW_PX
-        # The segmenter's texture blur (1: none); edges are then located on blurred images.
+        # Blur (px) of frame and reference before edges are located (1: none): on a textured belt,
+        # set from the segment settings, so the texture's pixel-to-pixel swing averages out.
         self.blur_px = 1
         self._width, self._height = mapper.calibration.size
         # Conservative pixel-area pre-filter, so tiny specks are never mapped at all.
@@ -60,12 +59,10 @@ class Measurer:
     def __call__(self, frame: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> list[Measurement]:
         """Measure every blob of ``mask``; ``reference`` is the empty belt (float32 or uint8)."""
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-        # Cheap rejection first, then only the largest blobs: clutter cannot stall the loop.
-        sized = [(area, c) for c in contours if (area := cv2.contourArea(c)) >= self._min_area_px]
-        if len(sized) > self.config.max_blobs:
-            sized = sorted(sized, key=lambda ac: -ac[0])[: self.config.max_blobs]
         found = []
-        for _, contour in sized:
+        for contour in contours:
+            if cv2.contourArea(contour) < self._min_area_px:
+                continue
             m = self._measure(frame, reference, contour)
             if m is not None:
                 found.append(m)
@@ -78,7 +75,6 @@ class Measurer:
         x, y, w, h = cv2.boundingRect(contour)
         b = cfg.border_margin_px + self.blur_px // 2  # a blurred mask stops short of the border
         clipped = x < b or y < b or x + w > self._width - b or y + h > self._height - b
-        clipped = clipped or (self._roi is not None and self._roi.touches_edge(contour))
         # The hull in pixels maps to the hull on the belt closely enough for the area test
         # (and costs a tenth of mapping the whole outline).
         hull_mm = self.mapper.to_mm(cv2.convexHull(contour).reshape(-1, 2))

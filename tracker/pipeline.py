@@ -7,6 +7,7 @@ recording replays to byte-identical poses.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import cv2
@@ -15,8 +16,11 @@ import numpy as np
 from tracker.calibration import Calibration
 from tracker.config import TrackerConfig
 from tracker.measure import HALF_WINDOW_PX, Measurer
-from tracker.poses import BeltState, FrameResult
-from tracker.segment import BeltMotion, RegionOfInterest, Segmenter
+from tracker.poses import FrameResult
+from tracker.segment import make_segmenter
+from tracker.segment.guard import ClutterGuard
+from tracker.segment.motion import BeltMotion
+from tracker.segment.roi import roi_mask, roi_polygon_px
 from tracker.track import Tracker
 from tracker.undistort import BeltMapper
 
@@ -29,73 +33,86 @@ class Pipeline:
         self.calibration = calibration
         self.config = config or TrackerConfig()
         seg = self.config.segment
-        self.roi = RegionOfInterest(seg, calibration)
-        self.segmenter = Segmenter(seg, None if self.roi.full else self.roi.mask)
-        self.motion = BeltMotion(seg, self.roi.box)
+        # The region of interest as an image polygon (pixels; None: the whole frame), for previews.
+        self.roi_px = roi_polygon_px(seg, calibration)
+        roi = roi_mask(self.roi_px, calibration.size)
+        self.roi_mask = None if self.roi_px is None else roi
+        self.segmenter = make_segmenter(seg, roi, calibration.mm_per_px_at_centre())
         self.mapper = mapper = BeltMapper(calibration, self.config.measure.part_height_mm)
-        self.measurer = Measurer(mapper, self.config.measure, self.roi)
+        self.measurer = Measurer(mapper, self.config.measure)
+        if seg.model == "textured":
+            # Edges on blurred images: the window must hold the blurred ramp and the mask's offset.
+            self.measurer.blur_px = seg.textured_edge_blur_px
+            self.measurer.half_window_px = HALF_WINDOW_PX + seg.textured_edge_blur_px
+        # The belt's own motion is measured where the belt model needs it (textured belts).
+        self.motion = BeltMotion(roi) if seg.model == "textured" else None
+        self._roi_centre_px = np.array(cv2.boundingRect(roi), dtype=np.float64)
+        self._roi_centre_px = self._roi_centre_px[:2] + self._roi_centre_px[2:] / 2
+        self._last_t_ns: int | None = None
+        self._belt_mm_s = (0.0, 0.0)
+        # Blobs this close to the region's edge are clipped (the measurement itself checks the image's).
+        edge_px = self.config.measure.border_margin_px + getattr(self.segmenter, "edge_px", 0)
+        self.guard = ClutterGuard(roi, seg.scene_fault_fraction, seg.max_blobs,
+                                  edge_px if self.roi_px is not None or seg.model == "textured" else 0)
         outline = mapper.view_outline_mm().astype(np.float32)
-        self.tracker = Tracker(self.config.track, lambda x, y: cv2.pointPolygonTest(outline, (x, y), False) >= 0)
-        x, y, w, h = self.roi.box
-        self._belt_centre_px = np.array([[x + w / 2, y + h / 2]])
-        self._last: FrameResult | None = None
-        self._last_moved_ns: int | None = None  # capture time of the last frame that was not a repeat
-        self._scene_faults = 0
+        # Where the belt has carried a point since the start (mm, world frame). With the belt's motion
+        # measured, parts are tracked on the belt, where a part riding it stands still through the
+        # belt's stops, slow phases and duplicate frames; without it the offset stays zero.
+        self._belt_offset_mm = np.zeros(2)
+        self.tracker = Tracker(self.config.track, lambda x, y: cv2.pointPolygonTest(
+            outline, (x + self._belt_offset_mm[0], y + self._belt_offset_mm[1]), False) >= 0)
         # Time spent per stage on the last frame (ns); for the status line and the benchmark only.
         self.stage_ns = dict.fromkeys(STAGES, 0)
-
-    @property
-    def roi_px(self) -> np.ndarray:
-        """The region of interest as an image polygon (for previews and the live view)."""
-        return self.roi.polygon_px
 
     def process(self, index: int, frame: np.ndarray, t_ns: int) -> FrameResult:
         clock = time.perf_counter_ns
         t0 = clock()
-        motion = self.motion(frame)
-        if motion.repeated and self._last is not None:
-            # A repeat of the previous image holds no news: the parts are where they were.
-            self.tracker.hold(t_ns)
-            self.stage_ns.update(segment=clock() - t0, undistort=0, measure=0, track=0)
-            self._last = FrameResult(index, t_ns, self._last.objects, (), self._belt(motion, t_ns), repeated=True)
-            return self._last
-        self.segmenter.belt_moving = np.hypot(motion.dx_px, motion.dy_px) >= self.config.segment.belt_still_px
+        belt = self._belt_motion(frame, t_ns)
         mask = self.segmenter(frame)
-        self.measurer.blur_px = self.segmenter.blur_px
-        self.measurer.half_window_px = HALF_WINDOW_PX + self.segmenter.blur_px // 2 + self.segmenter.blur_px // 2
+        if self.roi_mask is not None and self.motion is None:
+            mask = cv2.bitwise_and(mask, self.roi_mask)
+        guarded = self.guard(mask)
         t1 = clock()
-        scene_fault = self.segmenter.foreground_fraction > self.config.segment.scene_fault_fraction
         undistort_before = self.mapper.spent_ns
-        if scene_fault:
-            # Not understood (lights, a bumped camera): measure nothing, hold the tracks; if it
-            # lasts, the scene is the new normal: learn the belt anew.
-            self._scene_faults += 1
-            if self._scene_faults >= self.config.segment.relearn_after_frames:
-                self.segmenter.reset(frame)
-                self._scene_faults = 0
-            self.tracker.hold(t_ns)
-            objects = tuple(o for o in (self._last.objects if self._last else ()))
-            self.stage_ns.update(segment=t1 - t0, undistort=0, measure=0, track=0)
-            self._last = FrameResult(index, t_ns, objects, (), self._belt(motion, t_ns), scene_fault=True)
-            return self._last
-        self._scene_faults = 0
-        measurements = self.measurer(frame, self.segmenter.reference, mask)
+        measurements = self.measurer(frame, self.segmenter.reference, guarded.mask)
+        if guarded.at_edge:
+            # A blob reaching the edge of the region of interest may go on outside it: clipped.
+            measurements = [dataclasses.replace(m, clipped=True) if m.bbox_px in guarded.at_edge else m
+                            for m in measurements]
         t2 = clock()
-        objects = self.tracker.step(measurements, t_ns)
+        objects = self._track(measurements, t_ns, belt)
         t3 = clock()
         undistort = self.mapper.spent_ns - undistort_before
         self.stage_ns.update(segment=t1 - t0, undistort=undistort, measure=t2 - t1 - undistort, track=t3 - t2)
-        self._last = FrameResult(index, t_ns, objects, tuple(measurements), self._belt(motion, t_ns))
-        return self._last
+        return FrameResult(index, t_ns, objects, tuple(measurements), belt_mm_s=belt,
+                           scene_fault=guarded.scene_fault)
 
-    def _belt(self, motion, t_ns: int) -> BeltState:
-        """The belt's velocity on the belt plane (mm/s) from its image shift at the region's centre."""
-        if motion.repeated:
-            return BeltState(0.0, 0.0, True)
-        since, self._last_moved_ns = self._last_moved_ns, t_ns
-        if since is None or t_ns <= since:
-            return BeltState()
-        a = self.mapper.to_mm(self._belt_centre_px)
-        b = self.mapper.to_mm(self._belt_centre_px + [motion.dx_px, motion.dy_px])
-        vx, vy = (b - a)[0] / ((t_ns - since) / 1e9)
-        return BeltState(float(vx), float(vy), False)
+    def _track(self, measurements: list, t_ns: int, belt: tuple[float, float] | None) -> tuple:
+        if belt is None:
+            return self.tracker.step(measurements, t_ns)
+        ox, oy = self._belt_offset_mm
+        on_belt = [dataclasses.replace(m, rect=dataclasses.replace(m.rect, x_mm=m.rect.x_mm - ox,
+                                                                   y_mm=m.rect.y_mm - oy)) for m in measurements]
+        raw = {id(b): m for b, m in zip(on_belt, measurements, strict=True)}
+        return tuple(
+            dataclasses.replace(o, x_mm=o.x_mm + ox, y_mm=o.y_mm + oy, corners_mm=o.corners_mm + (ox, oy),
+                                vx_mm_s=o.vx_mm_s + belt[0], vy_mm_s=o.vy_mm_s + belt[1],
+                                raw=None if o.raw is None else raw[id(o.raw)])
+            for o in self.tracker.step(on_belt, t_ns))
+
+    def _belt_motion(self, frame: np.ndarray, t_ns: int) -> tuple[float, float] | None:
+        """The belt's velocity (mm/s, world frame) from its shift since the last frame; None when not measured."""
+        if self.motion is None:
+            return None
+        dx, dy = self.motion(frame)
+        self.segmenter.shift_px = (dx, dy)
+        self.segmenter.duplicate = self.motion.duplicate
+        if self.motion.duplicate:
+            return self._belt_mm_s  # not a new view of the belt: its last velocity holds
+        last, self._last_t_ns = self._last_t_ns, t_ns
+        if last is not None and t_ns > last:
+            a, b = self.mapper.to_mm(np.array([self._roi_centre_px, self._roi_centre_px + (dx, dy)]))
+            dt_s = (t_ns - last) / 1e9
+            self._belt_mm_s = (float(b[0] - a[0]) / dt_s, float(b[1] - a[1]) / dt_s)
+            self._belt_offset_mm = self._belt_offset_mm + (b - a)
+        return self._belt_mm_s

@@ -58,36 +58,23 @@ def _round_angle(angle_deg: float) -> float:
 
 
 @dataclass(frozen=True)
-class BeltState:
-    """The belt's motion measured from the images in this frame."""
-
-    vx_mm_s: float = 0.0
-    vy_mm_s: float = 0.0
-    # The frame repeated the previous one (nothing moved by more than the motion threshold).
-    repeated: bool = False
-
-    @property
-    def speed_mm_s(self) -> float:
-        return float(np.hypot(self.vx_mm_s, self.vy_mm_s))
-
-
-@dataclass(frozen=True)
 class FrameResult:
     frame: int
     t_ns: int
     objects: tuple[TrackedObject, ...]
     measurements: tuple[Measurement, ...] = ()
-    belt: BeltState = field(default_factory=BeltState)
-    # The frame repeated the previous one: the objects are the previous frame's.
-    repeated: bool = False
-    # Foreground covered most of the region of interest: nothing was measured (fault 5).
+    # The belt's velocity (mm/s, world frame) measured from the images; None where not measured.
+    belt_mm_s: tuple[float, float] | None = None
+    # The foreground covered most of the region of interest: nothing was measured (fault 5).
     scene_fault: bool = False
 
     def to_dict(self) -> dict:
-        r = _MM_DECIMALS
-        return {"frame": self.frame, "t": round(self.t_ns / 1e9, _T_DECIMALS),
-                "objects": [o.to_dict() for o in self.objects],
-                "belt": {"vx_mm_s": round(self.belt.vx_mm_s, r), "vy_mm_s": round(self.belt.vy_mm_s, r)}}
+        out = {"frame": self.frame, "t": round(self.t_ns / 1e9, _T_DECIMALS),
+               "objects": [o.to_dict() for o in self.objects]}
+        if self.belt_mm_s is not None:
+            vx, vy = self.belt_mm_s
+            out["belt"] = {"vx_mm_s": round(vx, _MM_DECIMALS), "vy_mm_s": round(vy, _MM_DECIMALS)}
+        return out
 
     def to_json_line(self) -> str:
         return json.dumps(self.to_dict(), allow_nan=False, separators=(", ", ": ")) + "\n"

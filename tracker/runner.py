@@ -16,7 +16,7 @@ from typing import Protocol, TextIO
 import numpy as np
 
 from tracker.errors import FrameSizeError, SourceLost, TrackerError
-from tracker.health import FAULT_CAMERA_LOST, FAULT_FRAME_SIZE, FAULT_OVERRUN, FAULT_SCENE, Health
+from tracker.health import FAULT_CAMERA_LOST, FAULT_FRAME_SIZE, FAULT_OVERRUN, FAULT_SCENE, FAULT_TEXT, Health
 from tracker.pipeline import Pipeline
 from tracker.poses import FrameResult
 from tracker.sources import Frame, FrameSource
@@ -45,6 +45,8 @@ class RunSummary:
     loop_ms_p50: float = 0.0
     loop_ms_p99: float = 0.0
     overruns: int = 0
+    # Frames whose foreground covered most of the region of interest (nothing measured in them).
+    scene_faults: int = 0
     stopped_by: str = "end of source"
 
     def line(self) -> str:
@@ -53,8 +55,11 @@ class RunSummary:
         return (
             f"{self.frames} frames in {self.seconds:.2f} s ({fps:.1f} fps), {parts} tracked, "
             f"{self.measured} measurements, loop p50 {self.loop_ms_p50:.2f} ms p99 {self.loop_ms_p99:.2f} ms, "
-            f"{self.overruns} overruns; stopped by {self.stopped_by}"
+            f"{self.overruns} overruns{self._scene()}; stopped by {self.stopped_by}"
         )
+
+    def _scene(self) -> str:
+        return f", {self.scene_faults} frames with the scene not understood" if self.scene_faults else ""
 
 
 class StatusLine:
@@ -107,7 +112,17 @@ class StatusLine:
             handler.removeFilter(self)
 
 
+def describe_belt(result: FrameResult) -> str:
+    """The belt's measured velocity for the status line ("" when not measured)."""
+    if result.belt_mm_s is None:
+        return ""
+    vx, vy = result.belt_mm_s
+    return f"belt {vx:+.0f},{vy:+.0f} mm/s"
+
+
 def describe(result: FrameResult) -> str:
+    if result.scene_fault:
+        return f"FAULT {FAULT_SCENE}: {FAULT_TEXT[FAULT_SCENE]}"
     if not result.objects:
         return "no part"
     o = result.objects[0]
@@ -143,16 +158,20 @@ class Runner:
                 t0 = time.perf_counter_ns()
                 result = self.pipeline.process(frame.index, frame.image, frame.t_ns)
                 health.part_tracked = bool(result.objects)
-                if result.scene_fault:
-                    if health.fault != FAULT_SCENE:
-                        log.warning("scene not understood: foreground covers most of the region of interest "
-                                    "(lighting changed? camera moved?); nothing measured (fault %d)", FAULT_SCENE)
-                    health.set_fault(FAULT_SCENE)
-                else:
-                    health.clear_fault(FAULT_SCENE)
                 health.overruns = self.source.overruns
                 if self.source.overruns:
                     health.set_fault(FAULT_OVERRUN)
+                if result.scene_fault:
+                    health.set_fault(FAULT_SCENE)
+                    if not summary.scene_faults:
+                        log.warning("%s frame %d: scene not understood: the foreground covers most of the region "
+                                    "of interest (fault %d); nothing is tracked while it lasts. Check the light, "
+                                    "the camera's position and segment settings (model, roi).",
+                                    self.source.name, frame.index, FAULT_SCENE)
+                    summary.scene_faults += 1
+                else:
+                    # Understood again (the reference re-learnt, the light back): the fault clears.
+                    health.clear_fault(FAULT_SCENE)
                 for sink in self.sinks:
                     sink.submit(frame, result)
                 this_loop_ns = time.perf_counter_ns() - t0
@@ -166,10 +185,8 @@ class Runner:
                     fps, fps_t, fps_n = fps_n / (now - fps_t), now, 0
                 if self.status and self.status.due():
                     parts = [f"frame {frame.index}", f"{fps:.0f} fps", f"loop {this_loop_ns / 1e6:.2f} ms",
-                             f"belt {result.belt.speed_mm_s:.0f} mm/s", f"objects {len(result.objects)}",
-                             describe(result)]
-                    if result.scene_fault:
-                        parts.append("SCENE NOT UNDERSTOOD")
+                             f"objects {len(result.objects)}", describe(result)]
+                    parts += [b for b in (describe_belt(result),) if b]
                     parts += [s for s in (sink.status() for sink in self.sinks) if s]
                     if self.source.overruns:
                         parts.append(f"overruns {self.source.overruns}")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+import cv2
 import numpy as np
 
 from tracker.config import TrackConfig
@@ -77,12 +78,6 @@ class Tracker:
         self.tracks: list[Track] = []
         self._next_id = 1
 
-    def hold(self, t_ns: int) -> None:
-        """The parts did not move since the last step (a repeated frame, a scene not understood):
-        advance the tracks' clocks without moving them, so the next step predicts one frame ahead."""
-        for track in self.tracks:
-            track.t_ns = max(track.t_ns, t_ns)
-
     def step(self, measurements: list[Measurement], t_ns: int) -> tuple[TrackedObject, ...]:
         cfg = self.config
         for track in self.tracks:
@@ -92,7 +87,10 @@ class Tracker:
             for mi, m in enumerate(measurements):
                 d = math.dist(track.position, (m.rect.x_mm, m.rect.y_mm))
                 # A clipped blob's centre is off the part's: allow for half the part.
-                gate = cfg.gate_mm + (float(track.kf.x[LENGTH, 0]) / 2 if m.clipped else 0.0)
+                # A centroid inside the predicted part (half its width) is that part whatever its size:
+                # parts lie flat and apart, so no other part's centroid can be there.
+                gate = max(cfg.gate_mm, float(track.kf.x[WIDTH, 0]) / 2)
+                gate += float(track.kf.x[LENGTH, 0]) / 2 if m.clipped else 0.0
                 if d <= gate:
                     pairs.append((d, ti, mi))
         pairs.sort()
@@ -119,10 +117,27 @@ class Tracker:
                 out.append(track.output(None))
             alive.append(track)
         for mi, m in enumerate(measurements):
-            if mi not in used and not m.clipped:
+            if mi not in used and not m.clipped and not self._inside_known(m, alive, measurements):
                 track = Track(self._next_id, m, t_ns, cfg)
                 self._next_id += 1
                 alive.append(track)
                 out.append(track.output(m))
         self.tracks = alive
         return tuple(sorted(out, key=lambda o: o.id))
+
+    def _inside_known(self, m: Measurement, tracks: list[Track], measurements: list[Measurement]) -> bool:
+        """Whether the blob is a piece of a known part rather than a new one: its centre lies within a
+        tracked part (half its length from its centre), or next to a part running out of view (within
+        the gate of a clipped blob's rectangle). Parts lie flat and apart, so such a blob is a
+        fragment, or the rest of a part tipping off the belt's end."""
+        for track in tracks:
+            reach = max(self.config.gate_mm, float(track.kf.x[LENGTH, 0]) / 2)
+            if math.dist(track.position, (m.rect.x_mm, m.rect.y_mm)) <= reach:
+                return True
+        for other in measurements:
+            if other.clipped:
+                r = other.rect
+                corners = rectangle_corners(r.x_mm, r.y_mm, r.angle_deg, r.length_mm, r.width_mm).astype(np.float32)
+                if cv2.pointPolygonTest(corners, (m.rect.x_mm, m.rect.y_mm), True) >= -self.config.gate_mm:
+                    return True
+        return False

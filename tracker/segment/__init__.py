@@ -1,13 +1,35 @@
-"""Segmentation: which pixels of a frame are parts, on a belt whose texture moves with them.
+"""Segmentation: frame in, foreground mask out, with ``reference`` the expected empty belt.
 
-``Segmenter`` (tracker/segment/reference.py) differences each frame against a learnt reference of
-the empty belt, after a blur that averages the belt's fine texture out; ``BeltMotion``
-(motion.py) measures how the belt moved since the previous frame; ``RegionOfInterest`` (roi.py)
-is the belt area outside which nothing is a part.
+Two belt models behind one interface (``segment.model`` in the configuration):
+``reference`` (reference.py) for belts whose look stays put, exact to sub-pixel edges;
+``textured`` (textured.py) for real belts whose texture moves with the parts. Around
+them: the region of interest (roi.py), the belt's motion (motion.py) and the clutter
+guard (guard.py).
 """
 
-from tracker.segment.motion import BeltMotion, MotionEstimate
-from tracker.segment.reference import Segmenter
-from tracker.segment.roi import RegionOfInterest
+from __future__ import annotations
 
-__all__ = ["BeltMotion", "MotionEstimate", "RegionOfInterest", "Segmenter"]
+from typing import Protocol
+
+import numpy as np
+
+from tracker.config import SegmentConfig
+from tracker.segment.reference import Segmenter
+from tracker.segment.textured import TexturedSegmenter
+
+__all__ = ["BeltModel", "Segmenter", "TexturedSegmenter", "make_segmenter"]
+
+
+class BeltModel(Protocol):
+    # Expected empty-belt image (float32, frame size) for sub-pixel edges; None before the first frame.
+    reference: np.ndarray | None
+
+    def __call__(self, frame: np.ndarray) -> np.ndarray: ...
+
+
+def make_segmenter(config: SegmentConfig, roi: np.ndarray, mm_per_px: float = 1.0) -> BeltModel:
+    """The configured belt model; ``roi`` is the region of interest (uint8 mask), ``mm_per_px`` the
+    belt's scale at the image centre."""
+    if config.model == "textured":
+        return TexturedSegmenter(config, roi, mm_per_px)
+    return Segmenter(config)

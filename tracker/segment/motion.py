@@ -1,65 +1,51 @@
-"""Belt motion from the images: the shift between consecutive frames, and repeated frames.
+"""Belt motion from the images: the shift of the belt between consecutive frames.
 
-Parts ride the belt, so everything in the region of interest that moves, moves with the belt:
-phase correlation of two consecutive (reduced, windowed) frames peaks at the belt's shift. Static
-things (rails, floor) are outside the region of interest. A frame that repeats the previous one
-(frame-rate conversion, a stopped belt with nothing moving) carries no new information.
+Phase correlation of two frames finds their dominant translation to a fraction of a
+pixel: inside the belt's region of interest that is the belt (its texture, streaks and
+the parts riding on it all move together). Duplicate frames and stops read as zero.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import cv2
 import numpy as np
 
-from tracker.config import SegmentConfig
-
-
-@dataclass(frozen=True)
-class MotionEstimate:
-    # Belt shift since the last frame that was not a repeat, full-resolution image pixels.
-    dx_px: float = 0.0
-    dy_px: float = 0.0
-    # Phase-correlation peak strength (0-1): how much of the image agrees with the shift.
-    confidence: float = 0.0
-    # No pixel changed by more than the motion threshold: a repeat of the previous frame.
-    repeated: bool = False
+# The correlated patch is at most this many pixels on its long side (averaged down first):
+# the cost stays bounded on any camera, and a belt's travel per frame stays measurable.
+_PATCH_PX = 256
+# A shift whose correlation peak is weaker than this is no measurement (a featureless or
+# changing view): the belt is taken to keep its last shift.
+_MIN_RESPONSE = 0.05
+# Frames differing by less than this (mean |diff|, grey levels) repeat each other (a frame-rate
+# conversion): the belt did not stop, the frame is just not new; its last shift is kept.
+_DUPLICATE_LEVEL = 0.3
 
 
 class BeltMotion:
-    """Feeds on each frame (and the ROI's bounding box); ``estimate`` is the latest motion."""
+    """Shift of the belt (image pixels, dx, dy) between each frame and the one before it."""
 
-    def __init__(self, config: SegmentConfig, box: tuple[int, int, int, int]) -> None:
-        self.config = config
-        x, y, w, h = box
-        self._box = box
-        self._scale = max(1, config.motion_reduce)
-        # Blur as for the textured-belt case always: it only feeds the reduction here.
-        self._blur = (config.texture_blur_px or config.texture_blur_auto_px,) * 2
-        self._size = (max(8, w // self._scale), max(8, h // self._scale))
+    def __init__(self, roi_mask: np.ndarray) -> None:
+        ys, xs = np.nonzero(roi_mask)
+        x0, x1, y0, y1 = xs.min(), xs.max() + 1, ys.min(), ys.max() + 1
+        self._box = (slice(int(y0), int(y1)), slice(int(x0), int(x1)))
+        self._scale = min(1.0, _PATCH_PX / max(x1 - x0, y1 - y0))
+        self._size = (max(8, round((x1 - x0) * self._scale)), max(8, round((y1 - y0) * self._scale)))
         self._window = cv2.createHanningWindow(self._size, cv2.CV_32F)
         self._prev: np.ndarray | None = None
-        self.estimate = MotionEstimate()
+        self.shift_px = (0.0, 0.0)
+        # The last frame repeated the one before it.
+        self.duplicate = False
 
-    def __call__(self, frame: np.ndarray) -> MotionEstimate:
-        x, y, w, h = self._box
-        crop = frame[y : y + h, x : x + w]
-        if self._blur[0] > 1:
-            crop = cv2.blur(crop, self._blur)  # a fine periodic texture would alias when reduced
-        small = cv2.resize(crop, self._size, interpolation=cv2.INTER_AREA)
-        prev = self._prev
-        if prev is None:
-            self._prev = small
-            self.estimate = MotionEstimate()
-            return self.estimate
-        changed = cv2.countNonZero(cv2.compare(cv2.absdiff(small, prev), self.config.motion_threshold, cv2.CMP_GT))
-        if changed == 0:
-            # Compared with the last frame that was not a repeat, so that a slow creep adds up.
-            self.estimate = MotionEstimate(repeated=True)
-            return self.estimate
-        self._prev = small
-        (dx, dy), response = cv2.phaseCorrelate(prev.astype(np.float32), small.astype(np.float32), self._window)
-        sx, sy = w / self._size[0], h / self._size[1]
-        self.estimate = MotionEstimate(dx * sx, dy * sy, float(response))
-        return self.estimate
+    def __call__(self, frame: np.ndarray) -> tuple[float, float]:
+        patch = frame[self._box]
+        if self._scale < 1.0:
+            patch = cv2.resize(patch, self._size, interpolation=cv2.INTER_AREA)
+        patch = patch.astype(np.float32)
+        prev, self._prev = self._prev, patch
+        self.duplicate = prev is not None and cv2.norm(patch, prev, cv2.NORM_L1) / patch.size < _DUPLICATE_LEVEL
+        if prev is None or self.duplicate:
+            return self.shift_px
+        (dx, dy), response = cv2.phaseCorrelate(prev, patch, self._window)
+        if response >= _MIN_RESPONSE:
+            self.shift_px = (dx / self._scale, dy / self._scale)
+        return self.shift_px

@@ -1,69 +1,42 @@
-"""The region of interest: the belt area, set once; outside it nothing is a part.
-
-Given in the configuration as an image polygon (pixels) or a belt polygon (millimetres, mapped
-into the image through the calibration); by default the whole image. A blob touching the
-region's edge is clipped like one touching the image border: part of it may be outside.
-"""
+"""Region of interest: the belt area, set once; outside it nothing is a part (rails, floor, shoes)."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
-from tracker.calibration import Calibration
+from tracker.calibration import Calibration, apply_homography
 from tracker.config import SegmentConfig
-from tracker.errors import BadInput
 
 
-class RegionOfInterest:
-    def __init__(self, config: SegmentConfig, calibration: Calibration) -> None:
-        w, h = calibration.size
-        if config.roi_px and config.roi_mm:
-            raise BadInput("segment: give roi_px (image polygon) or roi_mm (belt polygon), not both")
-        if config.roi_mm:
-            polygon = _belt_to_image(_polygon("segment.roi_mm", config.roi_mm), calibration)
-        elif config.roi_px:
-            polygon = _polygon("segment.roi_px", config.roi_px)
-        else:
-            polygon = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float64)
-        self.polygon_px = polygon
-        mask = np.zeros((h, w), dtype=np.uint8)
-        cv2.fillPoly(mask, [np.round(polygon).astype(np.int32)], 255)
-        if cv2.countNonZero(mask) < 64:
-            raise BadInput(f"segment: the region of interest covers {cv2.countNonZero(mask)} pixels of the "
-                           f"{w}x{h} image; expected a belt area inside the image")
-        self.mask = mask
-        self.full = cv2.countNonZero(mask) == w * h
-        self.area_px = cv2.countNonZero(mask)
-        # Its edge, where a blob is cut by the region (the image border is checked separately).
-        self.edge = cv2.subtract(mask, cv2.erode(mask, np.ones((3, 3), np.uint8), borderValue=255))
-        x, y, bw, bh = cv2.boundingRect(mask)
-        self.box = (x, y, bw, bh)
+def roi_polygon_px(config: SegmentConfig, calibration: Calibration) -> np.ndarray | None:
+    """The region of interest as an image polygon (Nx2 float64 pixels), or None for the whole image.
 
-    def touches_edge(self, points_px: np.ndarray) -> bool:
-        """Whether any of the (integer) contour points lie on the region's edge."""
-        if self.full:
-            return False
-        pts = points_px.reshape(-1, 2)
-        return bool(self.edge[pts[:, 1], pts[:, 0]].any())
-
-
-def _polygon(name: str, points) -> np.ndarray:
-    arr = np.asarray(points, dtype=np.float64) if all(
-        isinstance(p, list | tuple) and len(p) == 2 for p in points) else None
-    if arr is None or len(arr) < 3 or not np.isfinite(arr).all():
-        raise BadInput(f"{name}: expected a polygon of at least 3 [x, y] points, got {points!r}")
-    return arr
-
-
-def _belt_to_image(polygon_mm: np.ndarray, calibration: Calibration) -> np.ndarray:
-    """Belt millimetres -> distorted image pixels, edges sampled so a curved image of a straight
-    belt edge (lens distortion) is followed."""
+    A belt polygon (mm) is mapped into the image through the inverse belt homography and the lens
+    distortion, densified first so that its straight belt edges stay true under distortion.
+    """
+    if config.roi_px:
+        return np.array(config.roi_px, dtype=np.float64)
+    if not config.roi_mm:
+        return None
+    corners = np.array(config.roi_mm, dtype=np.float64)
     dense = []
-    for a, b in zip(polygon_mm, np.roll(polygon_mm, -1, axis=0), strict=True):
-        for s in np.linspace(0.0, 1.0, 16, endpoint=False):
-            dense.append(a + s * (b - a))
-    world = np.column_stack([np.asarray(dense), np.zeros(len(dense))])
-    pts, _ = cv2.projectPoints(world, calibration.belt_rvec, calibration.belt_tvec,
-                               calibration.camera_matrix, calibration.dist_coeffs)
-    return pts.reshape(-1, 2)
+    for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True):
+        for t in np.linspace(0.0, 1.0, 32, endpoint=False):
+            dense.append(a + t * (b - a))
+    undistorted = apply_homography(np.linalg.inv(calibration.belt_homography), np.array(dense))
+    k, d = calibration.camera_matrix, calibration.dist_coeffs
+    rays = cv2.undistortPoints(undistorted.reshape(-1, 1, 2), k, np.zeros(5), P=None).reshape(-1, 2)
+    pts3 = np.column_stack([rays, np.ones(len(rays))])
+    pixels, _ = cv2.projectPoints(pts3, np.zeros(3), np.zeros(3), k, d)
+    return pixels.reshape(-1, 2)
+
+
+def roi_mask(polygon_px: np.ndarray | None, size: tuple[int, int]) -> np.ndarray:
+    """255 inside the polygon (the whole frame when None), 0 outside; uint8 of ``size`` = (w, h)."""
+    w, h = size
+    if polygon_px is None:
+        return np.full((h, w), 255, np.uint8)
+    mask = np.zeros((h, w), np.uint8)
+    cv2.fillPoly(mask, [np.round(polygon_px).astype(np.int32)], 255)
+    return mask

@@ -1,0 +1,264 @@
+"""Segmentation for real belts whose texture, streaks and seams move with the parts.
+
+A per-pixel image of the empty belt is wrong as soon as the belt moves: its texture
+moves too. Two things stay true while it moves, and this model rests on them:
+
+- averaged over a few pixels, a belt's fine texture (diamonds, fibres, compression
+  noise) is nearly flat, while a part tens of pixels across keeps its level; so the
+  frame is averaged down to a small working image first;
+- at a fixed image pixel, the belt passing under it has a mean level and a spread
+  (streaks and seams pass by, rails and letterbox bars stay): per-pixel statistics
+  along the motion, which do not change as the belt moves. They learn in proportion
+  to the belt's travel (a stopped belt or a duplicate frame teaches nothing), and only
+  where nothing is foreground, so a part that stops with the belt stays a part.
+
+Foreground is where the smoothed level leaves the belt's mean by more than a floor and
+by more than a few of its standard deviations. The working image's margin is scaled up
+(linear interpolation) to a full-resolution mask; ``reference`` is the belt's mean at
+full resolution, for the measurement's sub-pixel edges.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from tracker.config import SegmentConfig
+
+# Belt travel (working pixels) that counts as one full learning step.
+_STEP_PX = 1.0
+# Learning never stops entirely: a static scene (belt not moving, rollers) still adapts slowly.
+_MIN_STEP = 0.1
+# A foreground blob whose frame content sits this close (mean |level - ring|, in thresholds)
+# to the belt around it, while the belt model inside does not, is a ghost: belt the model
+# learnt wrongly (a part or sheet in view at start, since gone). It joins the belt at once.
+_GHOST_FRACTION = 0.5
+# Radius (working pixels) within which the strongest contrast sets what is half of it.
+_NEAR_WORK_PX = 6
+# Working pixels along the region's edge that the smoothing blends with what lies outside it.
+_EDGE_WORK_PX = 4
+# Parts are at least this thick (working pixels, ~2 % of the long side): thinner is a streak.
+_MIN_PART_WORK_PX = 5
+# The belt's gain is followed only while at least this fraction of the working image shows belt.
+_MIN_BELT_FRACTION = 0.1
+# Blobs smaller than this (working pixels) are specks, not parts: never outlined.
+_MIN_BLOB_WORK_PX = 6
+# A blob is stationary (scenery, not a part) when the belt travelled at least this far (working
+# pixels) since the last frame and the blob matches the last frame in place this much better than
+# moved along with the belt; it is then learnt at this rate per frame.
+_STATIONARY_TRAVEL_WORK_PX = 0.25
+_STATIONARY_RATIO = 0.5
+_STATIONARY_RATE = 0.2
+# A blob's own contrast: this percentile of its |level - belt| (its body, not its blurred rim).
+_BLOB_LEVEL_PERCENTILE = 90
+
+
+class TexturedSegmenter:
+    """Frame in, foreground mask out; ``reference`` is the expected empty belt (float32, full size)."""
+
+    def __init__(self, config: SegmentConfig, roi: np.ndarray, mm_per_px: float = 1.0) -> None:
+        self.config = config
+        h, w = roi.shape
+        self._size = (w, h)
+        self._scale = min(1.0, config.textured_work_px / max(w, h))
+        self._work = (max(8, round(w * self._scale)), max(8, round(h * self._scale)))
+        self._roi = roi
+        self._roi_small = cv2.resize(roi, self._work, interpolation=cv2.INTER_AREA)
+        # Any working pixel touching the region belongs to it (the full mask is cut to the region later).
+        _, self._roi_small = cv2.threshold(self._roi_small, 0, 255, cv2.THRESH_BINARY)
+        self._kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (3, 3))
+        # Foreground thinner than this (working pixels) is a streak or seam across the belt, no part.
+        thin = max(_MIN_PART_WORK_PX, int(config.min_part_mm / mm_per_px * self._scale))
+        self._thin = cv2.getStructuringElement(cv2.MORPH_RECT, (thin, thin))
+        # A blob within this many pixels of the region's edge reaches it: it may go on outside and
+        # is clipped (the smoothing blends what lies outside into the region's last working pixels).
+        self.edge_px = int(np.ceil(_EDGE_WORK_PX / self._scale))
+        # "Near" a pixel for its peak contrast: a shadow or glow this close to a part is judged against it.
+        self._near = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * _NEAR_WORK_PX + 1,) * 2)
+        # One working pixel, at full resolution: how far a hull may grow to the half-contrast edge.
+        self._band = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * round(1 / self._scale) + 1,) * 2)
+        self.mean: np.ndarray | None = None
+        self._prev: np.ndarray | None = None
+        # Working pixels of the last frame that showed plain belt (far from any foreground).
+        self._belt = self._roi_small
+        self.var: np.ndarray | None = None
+        # The belt's travel since the last frame (image pixels) and whether the frame repeats the
+        # one before; set by the pipeline from the belt's measured motion before each frame.
+        self.shift_px = (0.0, 0.0)
+        self.duplicate = False
+
+    @property
+    def reference(self) -> UpsampledView | None:
+        """The belt's mean level at full resolution (float32), indexable like the full image; only
+        the pieces measurement reads (around each blob) are ever computed."""
+        return None if self.mean is None else UpsampledView(self.mean, self._size, self._scale)
+
+    def _smooth(self, frame: np.ndarray) -> np.ndarray:
+        small = cv2.resize(frame, self._work, interpolation=cv2.INTER_AREA).astype(np.float32)
+        return cv2.GaussianBlur(small, (3, 3), 0.8)
+
+    def __call__(self, frame: np.ndarray) -> np.ndarray:
+        cfg = self.config
+        small = self._smooth(frame)
+        if self.mean is None:
+            self._start(small)
+        else:
+            self._follow_exposure(small)
+        diff = small - self.mean
+        contrast = np.abs(diff)
+        # Foreground where |diff| > max(floor, k * sigma).
+        limit = np.maximum(cfg.textured_sigmas * np.sqrt(self.var), cfg.textured_threshold)
+        fg = cv2.bitwise_and(cv2.compare(contrast, limit, cv2.CMP_GT), self._roi_small)
+        fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, self._kernel)
+        # Everything unlike the belt (shadows and reflections included) is kept from learning,
+        # unless nearly everything is unlike it: then the model is wrong (light switched on, camera
+        # moved), not the belt covered, and it learns the scene anew.
+        lost = cv2.countNonZero(fg) > self.config.scene_fault_fraction * cv2.countNonZero(self._roi_small)
+        self._learn(small, diff, np.zeros_like(fg) if lost else fg)
+        self._belt = cv2.bitwise_and(cv2.bitwise_not(cv2.dilate(fg, self._near)), self._roi_small)
+        ghosts = self._absorb_ghosts(small, fg)
+        # Open: thin streaks, seams and edges across the belt are no parts.
+        fg = cv2.morphologyEx(cv2.bitwise_and(fg, cv2.bitwise_not(ghosts)), cv2.MORPH_OPEN, self._thin)
+        return cv2.bitwise_and(self._outline(contrast, fg), self._roi)
+
+    def _outline(self, contrast: np.ndarray, fg: np.ndarray) -> np.ndarray:
+        """The full-resolution mask: each part is the convex hull of its foreground pixels of at
+        least half the strongest contrast near them, grown to where the (interpolated) contrast
+        falls to half the part's own.
+
+        A part's edge is where a pixel is half part, half belt; its shadow, or the light it throws
+        on the belt, is far fainter than the part beside it and drops out, while the part's own
+        darker or lighter patches (print, folds, a screen) are inside the hull and keep it one blob.
+        Only the largest blobs are outlined: the work per frame is bounded.
+        """
+        w, h = self._size
+        mask = np.zeros((h, w), np.uint8)
+        if not cv2.countNonZero(fg):
+            return mask
+        peak = cv2.dilate(contrast, self._near)
+        strong = cv2.bitwise_and(fg, cv2.compare(contrast, 0.5 * peak, cv2.CMP_GE))
+        # Gaps narrower than the narrowest part are inside one (a display, a fold, a print).
+        strong = cv2.morphologyEx(strong, cv2.MORPH_CLOSE, self._thin)
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(strong, connectivity=8)
+        full = UpsampledView(contrast, self._size, self._scale)
+        scale = self._scale
+        order = np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable")[: self.config.max_blobs] + 1
+        for i in order:
+            x, y, bw, bh, area = stats[i]
+            if area < _MIN_BLOB_WORK_PX:
+                continue
+            box = (slice(y, y + bh), slice(x, x + bw))
+            inside = labels[box] == i
+            half = 0.5 * float(np.percentile(contrast[box][inside], _BLOB_LEVEL_PERCENTILE))
+            points = cv2.findNonZero(inside.astype(np.uint8))
+            hull = (cv2.convexHull(points).reshape(-1, 2) + (x, y) + 0.5) / scale - 0.5
+            # The band one working pixel around the hull, at full resolution.
+            x0, y0 = np.floor(hull.min(axis=0) - 1.5 / scale).astype(int)
+            x1, y1 = np.ceil(hull.max(axis=0) + 1.5 / scale).astype(int)
+            x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w, x1 + 1), min(h, y1 + 1)
+            poly = np.round(hull - (x0, y0)).astype(np.int32)
+            blob = np.zeros((y1 - y0, x1 - x0), np.uint8)
+            cv2.fillConvexPoly(blob, poly, 255)
+            band = cv2.dilate(blob, self._band)
+            grown = cv2.bitwise_and(cv2.compare(full[y0:y1, x0:x1], half, cv2.CMP_GE), band)
+            mask[y0:y1, x0:x1] |= cv2.bitwise_or(blob, grown)
+        return mask
+
+    def _start(self, small: np.ndarray) -> None:
+        """First frame: the belt runs along the region's long side, so each line along it is mostly
+        belt, whatever lies on it (parts, a sheet): the belt's level across it is that line's median.
+        Structure that stays put while the belt moves is learnt as it shows itself (``_stationary``)."""
+        roi = self._roi_small > 0
+        along_rows = np.count_nonzero(roi.any(axis=0)) >= np.count_nonzero(roi.any(axis=1))
+        # Outside the region: the region's overall median, so that lines leaving it are still defined.
+        values = np.where(roi, small, np.median(small[roi]))
+        axis = 1 if along_rows else 0
+        profile = np.median(values, axis=axis, keepdims=True)
+        # The belt's spread along each line (a robust sigma: 1.4826 x the median absolute deviation):
+        # a belt of rollers or bold stripes passes by with a large one, a plain belt with the floor.
+        sigma = 1.4826 * np.median(np.abs(values - profile), axis=axis, keepdims=True)
+        floor = self.config.textured_threshold / self.config.textured_sigmas
+        self.mean = (profile + np.zeros_like(small)).astype(np.float32)
+        self.var = (np.maximum(sigma, floor) ** 2 + np.zeros_like(small)).astype(np.float32)
+
+    def _follow_exposure(self, small: np.ndarray) -> None:
+        """A camera's automatic exposure (or the light) changes the whole belt's level at once,
+        faster than the belt can be learnt: the model follows the belt's overall gain each frame."""
+        if cv2.countNonZero(self._belt) < _MIN_BELT_FRACTION * self._belt.size:
+            return
+        model = cv2.mean(self.mean, mask=self._belt)[0]
+        if model > 1.0:
+            gain = cv2.mean(small, mask=self._belt)[0] / model
+            self.mean *= gain
+            self.var *= gain * gain
+
+    def _learn(self, small: np.ndarray, diff: np.ndarray, fg: np.ndarray) -> None:
+        if self.duplicate:
+            return  # a repeated frame brings no new belt
+        travel = float(np.hypot(*self.shift_px)) * self._scale / _STEP_PX
+        rate = self.config.textured_rate * min(1.0, max(_MIN_STEP, travel))
+        # Shadows and the light a part throws on the belt near it are no belt to learn either.
+        learn = cv2.bitwise_not(cv2.dilate(fg, self._near))
+        cv2.accumulateWeighted(small, self.mean, rate, mask=learn)
+        cv2.accumulateWeighted(cv2.multiply(diff, diff), self.var, rate, mask=learn)
+
+    def _absorb_ghosts(self, small: np.ndarray, fg: np.ndarray) -> np.ndarray:
+        """Blobs that are ghosts join the belt at once, blobs that stay put while the belt moves
+        join it quickly; returns the mask of the ghosts."""
+        ghosts = np.zeros_like(fg)
+        prev, self._prev = self._prev, small
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8)
+        if n <= 1:
+            return ghosts
+        floor = self.config.textured_threshold
+        h, w = fg.shape
+        dx, dy = (self._scale * d for d in self.shift_px)
+        moved = None
+        if prev is not None and not self.duplicate and np.hypot(dx, dy) >= _STATIONARY_TRAVEL_WORK_PX:
+            # The last frame moved along with the belt: what rides on the belt matches it, not ``prev``.
+            moved = cv2.warpAffine(prev, np.float32([[1, 0, dx], [0, 1, dy]]), (w, h), borderMode=cv2.BORDER_REPLICATE)
+        order = np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable")[: 2 * self.config.max_blobs] + 1
+        for i in order:
+            x, y, bw, bh, _ = stats[i]
+            x0, y0, x1, y1 = max(0, x - 2), max(0, y - 2), min(w, x + bw + 2), min(h, y + bh + 2)
+            blob = (labels[y0:y1, x0:x1] == i).astype(np.uint8) * 255
+            ring = cv2.bitwise_and(cv2.bitwise_xor(cv2.dilate(blob, self._kernel, iterations=2), blob),
+                                   cv2.bitwise_not(fg[y0:y1, x0:x1]))
+            if cv2.countNonZero(ring) < 4:
+                continue
+            img = small[y0:y1, x0:x1]
+            belt = cv2.mean(img, mask=ring)[0]
+            spread = cv2.mean(cv2.absdiff(img, belt), mask=blob)[0]
+            if spread < _GHOST_FRACTION * floor:
+                cv2.copyTo(img, blob, self.mean[y0:y1, x0:x1])
+                ghosts[y0:y1, x0:x1] |= blob
+            elif moved is not None:
+                still = cv2.mean(cv2.absdiff(img, prev[y0:y1, x0:x1]), mask=blob)[0]
+                riding = cv2.mean(cv2.absdiff(img, moved[y0:y1, x0:x1]), mask=blob)[0]
+                if still < _STATIONARY_RATIO * riding:
+                    # Rails, glare, a floor or rollers: belt scenery, not a part.
+                    cv2.accumulateWeighted(img, self.mean[y0:y1, x0:x1], _STATIONARY_RATE, mask=blob)
+        return ghosts
+
+
+class UpsampledView:
+    """A small image seen at full resolution (bilinear, as ``cv2.resize`` would scale it up),
+    computed only for the slices asked for: ``view[y0:y1, x0:x1]`` is a float32 array."""
+
+    def __init__(self, small: np.ndarray, size: tuple[int, int], scale: float) -> None:
+        self._small = small
+        self._scale = scale
+        self.shape = (size[1], size[0])
+
+    def __getitem__(self, key: tuple[slice, slice]) -> np.ndarray:
+        rows, cols = key
+        y0, y1, _ = rows.indices(self.shape[0])
+        x0, x1, _ = cols.indices(self.shape[1])
+        s = self._scale
+        # Full pixel centre (x + 0.5) sits at (x + 0.5) * s - 0.5 in the small image.
+        m = np.float32([[s, 0, (x0 + 0.5) * s - 0.5], [0, s, (y0 + 0.5) * s - 0.5]])
+        return cv2.warpAffine(self._small, m, (max(0, x1 - x0), max(0, y1 - y0)),
+                              flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+
+    def full(self) -> np.ndarray:
+        return self[0 : self.shape[0], 0 : self.shape[1]]
