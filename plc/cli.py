@@ -11,7 +11,7 @@ import threading
 from plc.encode import WordOrder
 from plc.mapdoc import FORMATS, render
 from plc.options import DEFAULT_SIM_HOST, DEFAULT_SIM_PORT
-from plc.registers import BLOCK_WORDS, MAX_BASE, SERVER_REGISTERS
+from plc.registers import MAX_BASE, SERVER_REGISTERS
 from plc.sim import PlcSimulator
 from tracker.errors import BadInput
 
@@ -42,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_map(args: argparse.Namespace) -> int:
     if not 0 <= args.base <= MAX_BASE:
-        raise BadInput(f"--base: expected 0-{MAX_BASE} (the {BLOCK_WORDS}-register block must fit), got {args.base}")
+        raise BadInput(f"--base: expected 0-{MAX_BASE} (registers base+0 to base+299 must fit), got {args.base}")
     sys.stdout.write(render(args.format, args.base))
     return 0
 

@@ -102,6 +102,10 @@ class PlcSimulator:
         regs[address:address + len(values)] = values
         self._record(address, values)
 
+    def writes(self, address: int = 0) -> list[Write]:
+        """The recorded writes that started at ``address`` (0: the blocks, 100: the queues)."""
+        return [w for w in list(self.history) if w.address == address]
+
     def _require(self) -> list[int]:
         if self._registers is None:
             raise SimulatorError("PLC simulator: not started")

@@ -9,7 +9,7 @@ import logging
 from plc.encode import WordOrder
 from plc.link import DatastoreLink, ModbusLink
 from plc.options import DEFAULT_SIM_HOST, DEFAULT_SIM_PORT, PlcOptions, parse_endpoint
-from plc.registers import BLOCK_WORDS, SERVER_REGISTERS
+from plc.registers import SERVER_REGISTERS
 from plc.sim import PlcSimulator
 from plc.writer import PlcWriter
 from tracker.health import Health
@@ -30,13 +30,13 @@ def open_plc_sink(args: argparse.Namespace, health: Health, demo: bool) -> PlcWr
     options = PlcOptions(host, port, unit=args.plc_unit, base=args.plc_base,
                          word_order=WordOrder(args.plc_word_order))
     if server:
-        sim = PlcSimulator(host, port, registers=max(SERVER_REGISTERS, options.base + BLOCK_WORDS)).start()
+        sim = PlcSimulator(host, port, registers=options.base + SERVER_REGISTERS).start()
         log.info("PLC: serving the register map on %s:%d (base %d) for the arm to poll", host, sim.port, options.base)
         return PlcWriter(DatastoreLink(sim), options, health, owned=(sim,))
     if args.plc:
         return PlcWriter(ModbusLink(options), options, health)
     # The demo: an embedded simulator on a free port, so it never collides with a real plc-sim.
-    sim = PlcSimulator(host, 0, registers=max(SERVER_REGISTERS, options.base + BLOCK_WORDS),
+    sim = PlcSimulator(host, 0, registers=options.base + SERVER_REGISTERS,
                        word_order=options.word_order).start()
     log.info("demo: writing to the embedded PLC simulator on %s:%d", host, sim.port)
     options = dataclasses.replace(options, port=sim.port)
