@@ -93,7 +93,7 @@ def test_simulator_logs_writes_at_a_human_rate(caplog):
         wait_until(lambda: any("plc-sim:" in r.getMessage() for r in caplog.records), "a simulator log line")
     lines = [r.getMessage() for r in caplog.records if "plc-sim:" in r.getMessage()]
     assert len(lines) == 1, "one line per period, not one per write"
-    assert lines[0].startswith("plc-sim: 20 writes; last (registers 0-44): seq 42 count 1 x 512.2 mm")
+    assert lines[0].startswith("plc-sim: 20 writes; block (registers 0-44): seq 42 count 1 x 512.2 mm")
 
 
 @pytest.mark.parametrize("size", [10, 70000])
