@@ -91,6 +91,7 @@ class PlcWriter:
         self._taken_reject: str | None = None  # the PLC refused to read 290-291: no handshake
         self._acked = False  # a write was acknowledged since the last (re)connect
         self._queue_last_capture: int | None = None
+        self._taken_reject_text: str | None = None  # a refused read of 290-291 not yet logged
         self._thread = threading.Thread(target=self._run, name="plc-writer", daemon=True)
         self._thread.start()
 
@@ -247,7 +248,7 @@ class PlcWriter:
     def _poll_taken(self) -> bool:
         """Read taken_id; True when the queue changes because of it (a part taken, or an id to echo)."""
         # Only once the block is acknowledged: a PLC refusing everything (wrong base) gets one error line.
-        if self._taken_reject or not self.link.connected or self.state != CONNECTED:
+        if self._taken_reject or self._queue_reject or not self.link.connected or self.state != CONNECTED:
             return False
         try:
             words = self.link.read(self.options.base + TAKEN.address, TAKEN.words)
@@ -255,9 +256,9 @@ class PlcWriter:
             self._lost(exc)
             return False
         except PlcRejected as exc:
+            # Logged after the next queue write: a PLC without any queue registers gets one line, not two.
             self._taken_reject = f"exception {exc.code}"
-            log.error("PLC %s: %s; taken_id is not read, parts are never dropped from the queue",
-                      self.link.name, exc)
+            self._taken_reject_text = str(exc)
             return False
         self.stats.taken_polls += 1
         taken_id = decode_u32(words, self.options.word_order)
@@ -352,9 +353,14 @@ class PlcWriter:
             return
         except PlcRejected as exc:
             self._queue_reject = f"exception {exc.code}"
-            log.error("PLC %s: %s; the PLC has no queue registers: only registers 0-44 are written",
-                      self.link.name, exc)
+            self._taken_reject_text = None
+            log.error("PLC %s: %s; the PLC has no queue registers: only registers 0-44 are written (no queue, "
+                      "no taken_id handshake)", self.link.name, exc)
             return
+        if self._taken_reject_text:
+            log.error("PLC %s: %s; taken_id is not read: parts are never dropped from the queue",
+                      self.link.name, self._taken_reject_text)
+            self._taken_reject_text = None
         self._queue_seq = seq
         self._queue_key = key
         self._queue_due = time.monotonic() + self.options.queue_period_s
