@@ -100,3 +100,10 @@ def test_simulator_logs_writes_at_a_human_rate(caplog):
 def test_simulator_refuses_a_map_that_does_not_fit(size):
     with pytest.raises(ValueError, match="registers"):
         PlcSimulator(registers=size)
+
+
+@pytest.mark.parametrize("ms", ["0", "-5", "nan"])
+def test_plc_sim_bad_arm_period_is_exit_2(ms, capsys):
+    assert main(["plc-sim", "--port", "0", "--arm-every", ms]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("tracker: error: --arm-every: expected 1-3600000 ms"), lines
