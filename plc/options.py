@@ -22,8 +22,9 @@ class PlcOptions:
     # Write at least this often without new poses: the contract's heartbeat is "at least every
     # 100 ms"; half of it leaves room for a slow write.
     heartbeat_s: float = 0.05
-    # The queue (100-219) is rewritten at least this often without changes: the contract says 100 ms.
-    queue_period_s: float = 0.1
+    # The queue (100-219) is rewritten at least this often without changes: the contract says 100 ms,
+    # this leaves room for the thread's wake-up and a slow write.
+    queue_period_s: float = 0.08
     # taken_id (290-291) is read this often: the echo is due within 100 ms of the PLC's write, and one
     # poll period plus one write must fit in that.
     taken_poll_s: float = 0.03
