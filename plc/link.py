@@ -80,14 +80,9 @@ class ModbusLink:
             raise LinkDown("not connected")
         try:
             response = self._client.write_registers(address, registers, device_id=self.options.unit)
-        except ModbusException as exc:
+        except Exception as exc:  # noqa: BLE001 - whatever a garbled answer makes pymodbus raise: reconnect
             self.close()
-            text = str(exc)
-            raise LinkDown(f"no response within {self.options.timeout_s:g} s" if "No response" in text
-                           else "connection closed by the PLC") from None
-        except OSError as exc:
-            self.close()
-            raise LinkDown(_reason(exc)) from None
+            raise LinkDown(self._failure(exc)) from None
         if response.isError():
             raise PlcRejected(getattr(response, "exception_code", 0), address, address + len(registers) - 1,
                               self.options.unit)
@@ -98,13 +93,9 @@ class ModbusLink:
             raise LinkDown("not connected")
         try:
             response = self._client.read_holding_registers(address, count=count, device_id=self.options.unit)
-        except ModbusException as exc:
+        except Exception as exc:  # noqa: BLE001 - as in write()
             self.close()
-            raise LinkDown(f"no response within {self.options.timeout_s:g} s" if "No response" in str(exc)
-                           else "connection closed by the PLC") from None
-        except OSError as exc:
-            self.close()
-            raise LinkDown(_reason(exc)) from None
+            raise LinkDown(self._failure(exc)) from None
         if response.isError():
             raise PlcRejected(getattr(response, "exception_code", 0), address, address + count - 1,
                               self.options.unit, "read")
@@ -112,6 +103,15 @@ class ModbusLink:
             self.close()
             raise LinkDown(f"expected {count} registers in the answer, got {len(response.registers)}")
         return list(response.registers)
+
+    def _failure(self, exc: Exception) -> str:
+        if isinstance(exc, OSError):
+            return _reason(exc)
+        if isinstance(exc, ModbusException):
+            # pymodbus drops answers it cannot use (garbage, another transaction id) and then times out.
+            return (f"no valid answer within {self.options.timeout_s:g} s" if "No response" in str(exc)
+                    else "connection closed by the PLC")
+        return f"unusable answer ({type(exc).__name__})"
 
     def close(self) -> None:
         self._client.close()

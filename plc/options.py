@@ -32,9 +32,10 @@ class PlcOptions:
     min_belt_speed_mm_s: float = 5.0
     # Connect and response timeout of one request. A PLC slower than this is treated as lost.
     timeout_s: float = 1.0
-    # Reconnect back-off: first wait, doubling up to the cap.
+    # Reconnect back-off after any failure: first wait, doubling up to the cap. The cap keeps the
+    # promise "reconnected within 2 s of the PLC coming back" (one wait plus one connect and write).
     backoff_first_s: float = 0.1
-    backoff_max_s: float = 2.0
+    backoff_max_s: float = 1.5
 
     def __post_init__(self) -> None:
         if not self.host:

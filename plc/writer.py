@@ -23,7 +23,7 @@ from plc.link import EXCEPTION_NAMES, Link, LinkDown, PlcRejected
 from plc.options import PlcOptions, backoff_delays
 from plc.queue import PickOrder, entry_fields
 from plc.registers import QUEUE_ENTRIES, QUEUE_START, QUEUE_WORDS, TAKEN
-from tracker.health import Health
+from tracker.health import FAULT_POSES, Health
 from tracker.poses import FrameResult
 from tracker.sources import Frame
 
@@ -156,6 +156,17 @@ class PlcWriter:
                 self._pending_empty = pose
 
     def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception:  # a bug must not silence the PLC without a word, nor skip the final block
+            log.exception("PLC %s: the writer failed; writing the final block", self.link.name)
+            self.health.set_fault(FAULT_POSES)
+        try:
+            self._final()
+        except Exception:
+            log.exception("PLC %s: the final block could not be written", self.link.name)
+
+    def _loop(self) -> None:
         fresh = lambda: backoff_delays(self.options.backoff_first_s, self.options.backoff_max_s)  # noqa: E731
         delays = fresh()
         next_beat = next_poll = 0.0
@@ -187,7 +198,6 @@ class PlcWriter:
                 # Every kind of failure waits before the next connect, not only a refused connect: a PLC
                 # that accepts and closes at once must not be hammered (and logged) hundreds of times.
                 self._stop.wait(next(delays))
-        self._final()
 
     def _final(self) -> None:
         if not self.link.connected and not self._connect():

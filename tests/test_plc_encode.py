@@ -264,10 +264,11 @@ def test_options_reject_bad_unit_and_base(kw, needle):
     assert PlcOptions("127.0.0.1", 502, base=65536 - 300).base == 65236  # the last base where 0-299 fits
 
 
-def test_backoff_doubles_and_caps_at_two_seconds():
+def test_backoff_doubles_and_caps_under_two_seconds():
+    # The README promises a reconnect within 2 s of the PLC coming back: one wait plus one connect.
     opts = PlcOptions("h", 1)
     assert list(itertools.islice(backoff_delays(opts.backoff_first_s, opts.backoff_max_s), 7)) == [
-        0.1, 0.2, 0.4, 0.8, 1.6, 2.0, 2.0]
+        0.1, 0.2, 0.4, 0.8, 1.5, 1.5, 1.5]
 
 
 def test_fields_index_by_name():
