@@ -72,7 +72,7 @@ def status_word(health: Health, running: bool, part_tracked: bool) -> int:
 class BlockState:
     heartbeat: int = 0
     seq: int = 0
-    count: int = 0
+    count: int = 0  # objects tracked in the frame; 0 when the queue is empty (contract section 4)
     t_capture_ms: int = 0
     obj: dict = field(default_factory=lambda: dict(_NO_OBJECT))
 
@@ -103,7 +103,8 @@ class BlockBuilder:
         seq, count, t_capture_ms, obj = s.seq, s.count, s.t_capture_ms, s.obj
         new_pose = False
         if pose is not None:
-            count = len(pose.objects)
+            # "When the queue is empty, count is 0" (all parts taken, or none in view).
+            count = len(pose.objects) if first is not None else 0
             if first is not None:
                 seq = (seq + 1) & U32_MASK
                 t_capture_ms = pose.t_capture_ms

@@ -161,9 +161,9 @@ def test_block_reports_the_given_first_entry_and_counts_poses():
     assert (ev["count"], ev["seq"], ev["x_mm"], ev["id"], ev["t_capture_ms"]) == (0, 1, 51.0, 3, 910)
     assert not ev["status"] & (1 << 3)
     b.commit(empty)
-    # Parts tracked but none listed (all taken): counted, object kept, seq unchanged.
+    # Parts tracked but none listed (all taken): the queue is empty, so count 0, object kept, seq unchanged.
     all_taken = b.prepare(Pose(930, (_obj(7, 9.0),)), health, True, 1004, None)
-    assert (all_taken.values["count"], all_taken.values["seq"], all_taken.values["id"]) == (1, 1, 3)
+    assert (all_taken.values["count"], all_taken.values["seq"], all_taken.values["id"]) == (0, 1, 3)
     beat = b.prepare(None, health, True, 1004)
     assert beat.values["count"] == 0 and beat.values["heartbeat"] == empty.values["heartbeat"] + 1
 
