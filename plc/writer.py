@@ -187,10 +187,14 @@ class PlcWriter:
             if now >= next_poll:
                 taken_changed = self._poll_taken()
                 next_poll = now + self.options.taken_poll_s
-            if self.link.connected and (pose is not None or taken_changed or now >= next_beat):
-                if self._write(pose, running=True, retake=taken_changed):
-                    next_beat = time.monotonic() + self.options.heartbeat_s
-            elif self.link.connected and now >= self._queue_due:
+            if not self.link.connected:
+                if pose is not None:
+                    self._put_back(pose)  # the taken_id read found the link down: write it after reconnecting
+            elif pose is not None or taken_changed or now >= next_beat:
+                # A refused write is not retried before the next heartbeat either: no busy loop.
+                self._write(pose, running=True, retake=taken_changed)
+                next_beat = time.monotonic() + self.options.heartbeat_s
+            elif now >= self._queue_due:
                 self._write_queue()
             if self._acked:
                 delays = fresh()
@@ -337,7 +341,7 @@ class PlcWriter:
         return True
 
     def _write_queue(self, entries: list | None = None) -> None:
-        if self._queue_reject or not self.link.connected:
+        if self._queue_reject or not self.link.connected or self.state != CONNECTED:
             self._queue_due = time.monotonic() + self.options.queue_period_s
             return
         if self._echo is None:

@@ -221,3 +221,19 @@ def test_server_mode_log_lines_name_the_tracker_server(caplog):
     lines = [r.getMessage() for r in caplog.records if r.name == "plc.sim"]
     assert lines and all(line.startswith(f"tracker's PLC server 127.0.0.1:{port}:") for line in lines), lines
     assert not any("plc-sim" in r.getMessage() for r in caplog.records)
+
+
+def test_refused_writes_are_retried_at_the_heartbeat_rate_not_in_a_busy_loop():
+    with PlcSimulator(port=0) as sim:
+        opts = PlcOptions("127.0.0.1", sim.port, base=300)  # past the server's 300 registers
+        writer = PlcWriter(ModbusLink(opts), opts, Health())
+        try:
+            wait_until(lambda: writer.stats.rejected >= 1, "the first refused write")
+            first = writer.stats.rejected
+            threading.Event().wait(1.0)  # a window to count in, not a wait for a server
+            refused = writer.stats.rejected - first
+        finally:
+            writer.close()
+    # One attempt per heartbeat (50 ms): about 20 in a second; a busy loop makes thousands.
+    assert 5 <= refused <= 40, refused
+    assert writer.stats.queue_writes == 0 and writer.stats.taken_polls == 0
