@@ -251,3 +251,14 @@ def test_cli_run_against_plc_sim_acting_as_the_arm(tmp_path):
     ids = {o["id"] for line in read_poses(poses_path) for o in line["objects"]}
     assert set(took) <= ids
     assert re.search(rf"the arm took {len(took)} parts", out)
+
+
+def test_the_demo_shows_the_handshake(capsys):
+    from tracker.cli import main
+    assert main(["run", "--max-frames", "75", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "its arm takes the first part of the queue every 1 s" in err
+    m = re.search(r"plc-sim arm: took part (\d+) at x -?\d+\.\d mm y -?\d+\.\d mm \(queue_seq \d+\); "
+                  r"echo after \d+ ms", err)
+    assert m, err
+    assert "no echo" not in err
