@@ -262,3 +262,37 @@ def test_the_demo_shows_the_handshake(capsys):
                   r"echo after \d+ ms", err)
     assert m, err
     assert "no echo" not in err
+
+
+def test_a_part_hidden_under_an_arm_stays_listed_with_its_age(tmp_path):
+    """Part A is covered for 12 frames (0.4 s; frames rendered without it): the queue keeps its id, as
+    predicted (measured 0) with age_frames counting, and it is measured again under the same id."""
+    import dataclasses
+
+    scene = queue_scene(2, n_frames=70, vx_mm_s=300.0, vy_mm_s=0.0)
+    hidden = range(40, 52)
+    b = scene.parts[1]
+    with_both, only_b = Rendered(scene), Rendered(dataclasses.replace(scene, parts=(b,)))
+    with_both.frames = [only_b.frames[i] if i in hidden else f for i, f in enumerate(with_both.frames)]
+    wo = WordOrder.ABCD
+    writer, sim, port = open_writer("client", wo, Health())
+    source = ScriptedCamera(with_both)
+    seen: dict = {}
+
+    def read_at(k: int, key: str) -> None:
+        want = ms_u32(source.arrival_ns[k - 1])
+        wait_until(lambda: decode_queue(sim.read(QUEUE_START, QUEUE_WORDS), wo)["t_capture_ms"] == want,
+                   f"the queue of frame {k - 1}")
+        seen[key] = {int(e["id"]): e for e in read_queue_mbpoll(port, wo)[1]["entries"]}
+
+    source.hooks = {39: lambda: read_at(39, "before"), 46: lambda: read_at(46, "hidden"),
+                    60: lambda: read_at(60, "after")}
+    poses = tmp_path / "poses.jsonl"
+    run_loop(source, [PoseSink(str(poses)), writer])
+    assert len(seen["before"]) == 2 and all(e["measured"] == 1 for e in seen["before"].values())
+    hidden_entries = [e for e in seen["hidden"].values() if e["measured"] == 0]
+    assert len(seen["hidden"]) == 2 and len(hidden_entries) == 1
+    assert hidden_entries[0]["age_frames"] == 46 - hidden.start  # frames 40-45 without a measurement
+    assert set(seen["after"]) == set(seen["before"]), "the same two ids after the arm has passed"
+    assert all(e["measured"] == 1 and e["age_frames"] == 0 for e in seen["after"].values())
+    assert len({o["id"] for line in read_poses(poses) for o in line["objects"]}) == 2
