@@ -237,3 +237,28 @@ def test_refused_writes_are_retried_at_the_heartbeat_rate_not_in_a_busy_loop():
     # One attempt per heartbeat (50 ms): about 20 in a second; a busy loop makes thousands.
     assert 5 <= refused <= 40, refused
     assert writer.stats.queue_writes == 0 and writer.stats.taken_polls == 0
+
+
+class BrokenSink:
+    """A sink whose close fails with an unexpected error (a device gone at exit)."""
+
+    def submit(self, frame, result) -> None:
+        pass
+
+    def status(self) -> str:
+        return ""
+
+    def close(self) -> None:
+        raise OSError(5, "Input/output error")
+
+
+def test_a_sink_failing_at_close_does_not_keep_the_final_block_from_the_plc():
+    rendered = Rendered(small_scene(20))
+    with PlcSimulator(port=0) as sim:
+        opts = PlcOptions("127.0.0.1", sim.port)
+        writer = PlcWriter(ModbusLink(opts), opts, Health())
+        with pytest.raises(OSError, match="Input/output error"):
+            run_loop(ScriptedCamera(rendered), [BrokenSink(), writer])
+        block = decode_block(sim.read(), WordOrder.ABCD)
+    assert not writer._thread.is_alive()
+    assert block["status"] & 1 == 0 and block["heartbeat"] >= 1
