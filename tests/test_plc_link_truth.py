@@ -28,6 +28,7 @@ from plc.link import ModbusLink
 from plc.options import PlcOptions
 from plc.sim import PlcSimulator
 from plc.writer import PlcWriter
+from tracker.cli import main as main_run
 from tracker.health import FAULT_CAMERA_LOST, Health
 
 TIMEOUT_S = 0.3
@@ -196,8 +197,7 @@ def test_final_block_after_a_fatal_error_clears_running_and_sets_the_fault():
 
 
 def test_empty_plc_option_is_refused(capsys):
-    from tracker.cli import main
-    assert main(["run", "--plc", "", "--max-frames", "1", "--quiet"]) == 2
+    assert main_run(["run", "--plc", "", "--max-frames", "1", "--quiet"]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "--plc: expected HOST:PORT" in lines[0], lines
 
@@ -262,3 +262,16 @@ def test_a_sink_failing_at_close_does_not_keep_the_final_block_from_the_plc():
         block = decode_block(sim.read(), WordOrder.ABCD)
     assert not writer._thread.is_alive()
     assert block["status"] & 1 == 0 and block["heartbeat"] >= 1
+
+
+def test_cli_against_a_plc_that_closes_at_once_logs_one_line(capsys):
+    plc = BadPlc("close")
+    try:
+        assert main_run(["run", "--max-frames", "45", "--quiet", "--plc", f"127.0.0.1:{plc.port}"]) == 0
+    finally:
+        plc.close()
+    err = capsys.readouterr().err.strip().splitlines()
+    plc_lines = [line for line in err if "PLC 127.0.0.1" in line]
+    assert len(plc_lines) == 1 and "does not answer writes" in plc_lines[0], err
+    assert len(err) <= 3, err  # that line, and at most the demo's own
+    assert plc.accepted <= 10, plc.accepted  # 1.5 s of back-off, not hundreds of reconnects
