@@ -84,6 +84,9 @@ class TrackConfig:
     max_coast_s: float = 0.6
     # Measurements that make a track established (allowed to coast for max_coast_s).
     coast_min_hits: int = 3
+    # ... and it must move with the belt: a still blob that vanishes (the ghost of a part that was in
+    # view at start, a part lifted off a stopped belt) ends after max_missed_frames like a young track.
+    coast_min_speed_mm_s: float = 20.0
 
     def __post_init__(self) -> None:
         _positive(self, *(f.name for f in fields(self)))

@@ -70,8 +70,10 @@ class Track:
         )
 
     def ended(self, t_ns: int, cfg: TrackConfig) -> bool:
-        """No blob for too long: frames for a young track, time for an established one (an occluded part)."""
-        if self.hits < cfg.coast_min_hits:
+        """No blob for too long: time for an established track moving with the belt (a part an arm passes
+        over), frames for any other."""
+        speed = math.hypot(float(self.kf.x[VX, 0]), float(self.kf.x[VY, 0]))
+        if self.hits < cfg.coast_min_hits or speed < cfg.coast_min_speed_mm_s:
             return self.missed > cfg.max_missed_frames
         return t_ns - self.seen_ns > cfg.max_coast_s * 1e9
 
