@@ -38,7 +38,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     plc = sub.add_parser("plc", help="PLC helpers (plc map: the register map)")
     plc_sub = plc.add_subparsers(dest="plc_command", metavar="COMMAND", required=True)
     m = plc_sub.add_parser("map", help="print the register map (0-based addresses and 4xxxx numbers)",
-                           description="The Modbus holding registers the tracker writes (contract section 4).")
+                           description="The Modbus holding registers the tracker writes (contract sections 4 and "
+                           "4b) and the one the PLC writes (taken_id).")
     m.add_argument("--format", choices=FORMATS, default="text", help="text table (default), csv or markdown")
     m.add_argument("--base", type=int, default=0, help="the --plc-base the tracker runs with (default 0)")
     m.set_defaults(func=run_map)
