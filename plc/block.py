@@ -1,9 +1,7 @@
-"""What goes into registers 0-42: the reported object, the counters and the status word.
+"""What goes into registers 0-44: the reported object, the counters and the status word.
 
-Which object is reported when several are tracked: the oldest track (lowest id). Parts on a
-belt move together, so the part that entered the view first is the most downstream one, the one
-the arm must take first; and the choice stays on that part until it leaves the view, instead of
-flipping between neighbours on measurement noise.
+Which object is reported when several are tracked: the first entry of the queue (``plc.queue``,
+contract section 4b), i.e. the next part to pick; the writer passes it in.
 """
 
 from __future__ import annotations
@@ -28,7 +26,8 @@ NS_PER_MS = 1_000_000
 
 # Object fields before the first pose (the PLC sees zeros and seq 0).
 _NO_OBJECT: dict = {"id": 0, "x_mm": 0.0, "y_mm": 0.0, "angle_deg": 0.0, "vx_mm_s": 0.0, "vy_mm_s": 0.0,
-                    "length_mm": 0.0, "width_mm": 0.0, "corners_mm": [0.0] * 8, "measured": 0}
+                    "length_mm": 0.0, "width_mm": 0.0, "corners_mm": [0.0] * 8, "measured": 0,
+                    "height_mm": 0.0}
 
 
 def ms_u32(monotonic_ns: int) -> int:
@@ -50,18 +49,13 @@ class Pose:
             raise ValueError(f"Pose: t_capture_ms must be a uint32, got {self.t_capture_ms}")
 
 
-def select_object(objects: tuple[TrackedObject, ...]) -> TrackedObject:
-    """The reported object: the oldest track (lowest id)."""
-    return min(objects, key=lambda o: o.id)
-
-
 def object_fields(obj: TrackedObject) -> dict:
     # The pose stream's rounded values, so the registers hold exactly float32(<pose stream value>).
     d = obj.to_dict()
     return {"id": d["id"], "x_mm": d["x_mm"], "y_mm": d["y_mm"], "angle_deg": d["angle_deg"],
             "vx_mm_s": d["vx_mm_s"], "vy_mm_s": d["vy_mm_s"], "length_mm": d["length_mm"],
             "width_mm": d["width_mm"], "corners_mm": [v for xy in d["corners_mm"] for v in xy],
-            "measured": int(d["measured"])}
+            "measured": int(d["measured"]), "height_mm": d["height_mm"]}
 
 
 def status_word(health: Health, running: bool, part_tracked: bool) -> int:
@@ -78,7 +72,7 @@ def status_word(health: Health, running: bool, part_tracked: bool) -> int:
 class BlockState:
     heartbeat: int = 0
     seq: int = 0
-    count: int = 0
+    count: int = 0  # objects tracked in the frame; 0 when the queue is empty (contract section 4)
     t_capture_ms: int = 0
     obj: dict = field(default_factory=lambda: dict(_NO_OBJECT))
 
@@ -101,17 +95,20 @@ class BlockBuilder:
         self.order = order
         self.state = BlockState()
 
-    def prepare(self, pose: Pose | None, health: Health, running: bool, t_write_ms: int) -> Prepared:
-        """``pose`` None: a heartbeat-only write (same object fields, same seq)."""
+    def prepare(self, pose: Pose | None, health: Health, running: bool, t_write_ms: int,
+                first: TrackedObject | None = None) -> Prepared:
+        """``pose`` None: a heartbeat-only write (same object fields, same seq). ``first``: the object to
+        report (the queue's first entry), None when the queue is empty (object fields and seq kept)."""
         s = self.state
         seq, count, t_capture_ms, obj = s.seq, s.count, s.t_capture_ms, s.obj
         new_pose = False
         if pose is not None:
-            count = len(pose.objects)
-            if pose.objects:
+            # "When the queue is empty, count is 0" (all parts taken, or none in view).
+            count = len(pose.objects) if first is not None else 0
+            if first is not None:
                 seq = (seq + 1) & U32_MASK
                 t_capture_ms = pose.t_capture_ms
-                obj = object_fields(select_object(pose.objects))
+                obj = object_fields(first)
                 new_pose = True
         state = BlockState((s.heartbeat + 1) & U16_MASK, seq, count, t_capture_ms, obj)
         values = {"heartbeat": state.heartbeat, "status": status_word(health, running, count > 0),

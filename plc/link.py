@@ -30,10 +30,10 @@ class LinkDown(Exception):
 class PlcRejected(Exception):
     """The PLC answered with a Modbus exception response: the connection is fine, the request is not."""
 
-    def __init__(self, code: int, first: int, last: int, unit: int) -> None:
+    def __init__(self, code: int, first: int, last: int, unit: int, what: str = "write") -> None:
         self.code = code
         name = EXCEPTION_NAMES.get(code, "unknown exception")
-        super().__init__(f"exception {code} ({name}) to the write of registers {first}-{last} "
+        super().__init__(f"exception {code} ({name}) to the {what} of registers {first}-{last} "
                          f"({40001 + first}-{40001 + last}) on unit {unit}")
 
 
@@ -46,6 +46,8 @@ class Link(Protocol):
     def connect(self) -> None: ...
 
     def write(self, address: int, registers: list[int]) -> None: ...
+
+    def read(self, address: int, count: int) -> list[int]: ...
 
     def close(self) -> None: ...
 
@@ -78,17 +80,38 @@ class ModbusLink:
             raise LinkDown("not connected")
         try:
             response = self._client.write_registers(address, registers, device_id=self.options.unit)
-        except ModbusException as exc:
+        except Exception as exc:  # noqa: BLE001 - whatever a garbled answer makes pymodbus raise: reconnect
             self.close()
-            text = str(exc)
-            raise LinkDown(f"no response within {self.options.timeout_s:g} s" if "No response" in text
-                           else "connection closed by the PLC") from None
-        except OSError as exc:
-            self.close()
-            raise LinkDown(_reason(exc)) from None
+            raise LinkDown(self._failure(exc)) from None
         if response.isError():
             raise PlcRejected(getattr(response, "exception_code", 0), address, address + len(registers) - 1,
                               self.options.unit)
+
+    def read(self, address: int, count: int) -> list[int]:
+        """Holding registers the PLC owns (taken_id), with the same failure handling as ``write``."""
+        if not self._client.connected:
+            raise LinkDown("not connected")
+        try:
+            response = self._client.read_holding_registers(address, count=count, device_id=self.options.unit)
+        except Exception as exc:  # noqa: BLE001 - as in write()
+            self.close()
+            raise LinkDown(self._failure(exc)) from None
+        if response.isError():
+            raise PlcRejected(getattr(response, "exception_code", 0), address, address + count - 1,
+                              self.options.unit, "read")
+        if len(response.registers) != count:
+            self.close()
+            raise LinkDown(f"expected {count} registers in the answer, got {len(response.registers)}")
+        return list(response.registers)
+
+    def _failure(self, exc: Exception) -> str:
+        if isinstance(exc, OSError):
+            return _reason(exc)
+        if isinstance(exc, ModbusException):
+            # pymodbus drops answers it cannot use (garbage, another transaction id) and then times out.
+            return (f"no valid answer within {self.options.timeout_s:g} s" if "No response" in str(exc)
+                    else "connection closed by the PLC")
+        return f"unusable answer ({type(exc).__name__})"
 
     def close(self) -> None:
         self._client.close()
@@ -111,6 +134,9 @@ class DatastoreLink:
 
     def write(self, address: int, registers: list[int]) -> None:
         self._sim.write(address, registers)
+
+    def read(self, address: int, count: int) -> list[int]:
+        return self._sim.read(address, count)
 
     def close(self) -> None:
         pass

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from plc.encode import WordOrder, decode_block
+from plc.encode import WordOrder, decode_block, decode_queue
 from plc.options import DEFAULT_SIM_HOST, DEFAULT_SIM_PORT
-from plc.registers import BLOCK_WORDS, SERVER_REGISTERS
+from plc.registers import BLOCK_WORDS, QUEUE_WORDS, SERVER_REGISTERS
 from tracker.errors import TrackerError
 
 log = logging.getLogger(__name__)
@@ -46,12 +46,14 @@ class Write:
 class PlcSimulator:
     def __init__(self, host: str = DEFAULT_SIM_HOST, port: int = DEFAULT_SIM_PORT,
                  registers: int = SERVER_REGISTERS, word_order: WordOrder = WordOrder.ABCD,
-                 log_period_s: float = 1.0, response_delay_s: float = 0.0) -> None:
+                 log_period_s: float = 1.0, response_delay_s: float = 0.0, label: str = "plc-sim") -> None:
         if registers < BLOCK_WORDS or registers > 0x10000:
             raise ValueError(f"simulator: expected {BLOCK_WORDS}-65536 registers, got {registers}")
         self.host = host
         self.port = port  # 0: any free port; the real one once started
         self.size = registers
+        # Names the server in its log lines: "plc-sim" (a stand-in PLC) or the tracker's own server.
+        self.label = label
         self.word_order = word_order
         self.log_period_s = log_period_s
         # Answer every request this late (to test a slow PLC).
@@ -71,7 +73,7 @@ class PlcSimulator:
         self._thread = threading.Thread(target=self._thread_main, name="plc-sim", daemon=True)
         self._thread.start()
         if not self._ready.wait(START_TIMEOUT_S):
-            raise SimulatorError(f"PLC simulator on {self.host}:{self.port}: did not start in {START_TIMEOUT_S} s")
+            raise SimulatorError(f"{self.label} on {self.host}:{self.port}: did not start in {START_TIMEOUT_S} s")
         if self._error:
             raise SimulatorError(self._error)
         return self
@@ -102,6 +104,16 @@ class PlcSimulator:
         regs[address:address + len(values)] = values
         self._record(address, values)
 
+    def store(self, address: int, values: list[int]) -> None:
+        """The PLC program's own write into its registers (the arm's taken_id): not a received write."""
+        regs = self._require()
+        self._check_range(address, len(values))
+        regs[address:address + len(values)] = values
+
+    def writes(self, address: int = 0) -> list[Write]:
+        """The recorded writes that started at ``address`` (0: the blocks, 100: the queues)."""
+        return [w for w in list(self.history) if w.address == address]
+
     def _require(self) -> list[int]:
         if self._registers is None:
             raise SimulatorError("PLC simulator: not started")
@@ -120,7 +132,7 @@ class PlcSimulator:
         try:
             asyncio.run(self._serve())
         except Exception as exc:  # noqa: BLE001 - reported to start() as one line
-            self._error = f"PLC simulator on {self.host}:{self.port}: {exc}"
+            self._error = f"{self.label} on {self.host}:{self.port}: {exc}"
         finally:
             self.running = False
             self._ready.set()
@@ -170,11 +182,22 @@ class PlcSimulator:
                 seen = self.write_count
 
     def describe_writes(self, n: int) -> str:
-        last = self.history[-1]
-        where = f"{last.address}-{last.address + len(last.values) - 1}"
-        if len(last.values) != BLOCK_WORDS:
-            return f"plc-sim: {n} writes; last: registers {where}"
-        v = decode_block(last.values, self.word_order)
-        return (f"plc-sim: {n} writes; last (registers {where}): seq {v['seq']} count {v['count']} "
-                f"x {v['x_mm']:.1f} mm y {v['y_mm']:.1f} mm angle {v['angle_deg']:.1f} deg "
-                f"heartbeat {v['heartbeat']} status 0x{v['status']:04x} fault {v['fault']}")
+        """One line: how many writes, the newest block (0-44) and the newest queue (100-219) among them."""
+        recent = list(self.history)[-max(1, min(n, 16)):]
+        block = next((w for w in reversed(recent) if len(w.values) == BLOCK_WORDS), None)
+        queue = next((w for w in reversed(recent) if len(w.values) == QUEUE_WORDS), None)
+        parts = [f"{self.label}: {n} writes"]
+        if block is not None:
+            v = decode_block(block.values, self.word_order)
+            parts.append(f"block (registers {block.address}-{block.address + BLOCK_WORDS - 1}): seq {v['seq']} "
+                         f"count {v['count']} x {v['x_mm']:.1f} mm y {v['y_mm']:.1f} mm angle {v['angle_deg']:.1f} "
+                         f"deg heartbeat {v['heartbeat']} status 0x{v['status']:04x} fault {v['fault']}")
+        if queue is not None:
+            q = decode_queue(queue.values, self.word_order)
+            parts.append(f"queue (registers {queue.address}-{queue.address + QUEUE_WORDS - 1}): seq {q['queue_seq']} "
+                         f"ids {[int(e['id']) for e in q['entries']]} in view {q['in_view']} "
+                         f"echo {q['taken_echo']}")
+        if block is None and queue is None:
+            last = self.history[-1]
+            parts.append(f"last: registers {last.address}-{last.address + len(last.values) - 1}")
+        return "; ".join(parts)

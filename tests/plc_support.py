@@ -21,7 +21,7 @@ from tracker.pipeline import Pipeline
 from tracker.runner import Runner
 from tracker.scenes import nadir, resized
 from tracker.sources import Frame, FrameSource
-from tracker.synthetic import Renderer
+from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec
 
 MBPOLL = shutil.which("mbpoll") or "/usr/bin/mbpoll"
 TRACKER = str(Path(sys.executable).with_name("tracker"))
@@ -118,3 +118,25 @@ def mbpoll(port: int, ref: int, count: int, kind: str, big_endian: bool, unit: i
     assert proc.returncode == 0, f"mbpoll failed: {proc.stdout}{proc.stderr}"
     values = dict(re.findall(r"^\[(\d+)\]:\s+(\S+)", proc.stdout, flags=re.M))
     return {int(k): v for k, v in values.items()}
+
+
+def mbpoll_write_u32(port: int, ref: int, value: int, big_endian: bool, unit: int = 1) -> None:
+    """Write one 32-bit value (two holding registers, one request) with mbpoll, as a PLC program would."""
+    if not os.path.exists(MBPOLL):
+        pytest.skip("mbpoll is not installed (.ci/run installs the Debian package)")
+    cmd = [MBPOLL, "-m", "tcp", "-a", str(unit), "-0", "-r", str(ref), "-t", "4:int", "-o", "2", "-p", str(port),
+           *(["-B"] if big_endian else []), "127.0.0.1", str(value)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=DEADLINE_S)
+    assert proc.returncode == 0 and "Written 1 references" in proc.stdout, f"mbpoll failed: {proc.stdout}{proc.stderr}"
+
+
+def queue_scene(n_parts: int, n_frames: int = 60, vx_mm_s: float = 250.0, vy_mm_s: float = 120.0):
+    """``n_parts`` (2-6) flat parts of different sizes in three lanes entering a 320x240 view one after the
+    other and moving together at (vx, vy). The belt runs diagonally across the view, so a part that
+    enters later can be further along the belt than one already in view: pick order is not id order."""
+    lanes = (-210.0, 110.0, -50.0)
+    sizes = ((80, 50), (60, 40), (70, 45), (90, 35), (50, 50), (65, 30))
+    parts = tuple(PartSpec(*sizes[i], 0, -470.0 - 70.0 * i, lanes[i % 3], 15.0 * i, vx_mm_s, vy_mm_s,
+                           intensity=170 + 10 * i) for i in range(n_parts))
+    scene = SceneSpec(CameraSpec(), parts, fps=30.0, n_frames=n_frames, supersample=2, blur_samples=1)
+    return resized(scene, 320, 240)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import logging
+import re
 import subprocess
 from pathlib import Path
 
@@ -13,7 +14,7 @@ from plc_support import TRACKER, wait_until
 
 from plc.encode import WordOrder, encode_block
 from plc.mapdoc import render
-from plc.registers import REGISTER_MAP
+from plc.registers import ENTRY_MAP, QUEUE_HEADER, REGISTER_MAP
 from plc.sim import PlcSimulator
 from tracker.cli import main
 
@@ -25,12 +26,20 @@ def test_map_text_lists_offsets_and_4x_numbers(capsys):
     assert main(["plc", "map"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].split()[:4] == ["addr", "register", "type", "name"]
-    rows = {line.split()[3 if "x 8" not in line else 5]: line.split()[:2] for line in lines[1:]}
+    rows = {}
+    for line in lines[1:]:
+        cols = re.split(r"\s{2,}", line)
+        rows[cols[3]] = cols[:2]
     assert rows["heartbeat"] == ["0", "40001"]
     assert rows["x_mm"] == ["12-13", "40013-40014"]
     assert rows["corners_mm"] == ["26-41", "40027-40042"]
     assert rows["measured"] == ["42", "40043"]
-    assert len(lines) == 1 + len(REGISTER_MAP)
+    assert rows["height_mm"] == ["43-44", "40044-40045"]
+    assert rows["queue_seq"] == ["100-101", "40101-40102"]
+    assert rows["entry[k].id"] == ["110-111 + 22k", "40111-40112 + 22k"]
+    assert rows["entry[k].flags"] == ["130 + 22k", "40131 + 22k"]
+    assert rows["taken_id"] == ["290-291", "40291-40292"]
+    assert len(lines) == 1 + len(REGISTER_MAP) + len(QUEUE_HEADER) + len(ENTRY_MAP) + 1
 
 
 def test_map_csv_with_base(capsys):
@@ -40,11 +49,14 @@ def test_map_csv_with_base(capsys):
     assert (by_name["seq"]["address"], by_name["seq"]["last_address"]) == ("104", "105")
     assert (by_name["seq"]["register"], by_name["seq"]["type"]) == ("40105", "uint32")
     assert by_name["corners_mm"]["count"] == "8" and by_name["corners_mm"]["last_register"] == "40142"
+    # Every queue entry with its own address, for tag import: entry k at 110 + 22k (+ base).
+    assert [by_name[f"entry{k}.id"]["address"] for k in range(5)] == ["210", "232", "254", "276", "298"]
+    assert by_name["entry4.reserved"]["address"] == "319" and by_name["taken_id"]["register"] == "40391"
 
 
 def test_map_bad_base_is_exit_2(capsys):
     assert main(["plc", "map", "--base", "70000"]) == 2
-    assert capsys.readouterr().err.strip().startswith("tracker: error: --base: expected 0-65493")
+    assert capsys.readouterr().err.strip().startswith("tracker: error: --base: expected 0-65236")
 
 
 def test_readme_table_is_the_code_table():
@@ -81,10 +93,17 @@ def test_simulator_logs_writes_at_a_human_rate(caplog):
         wait_until(lambda: any("plc-sim:" in r.getMessage() for r in caplog.records), "a simulator log line")
     lines = [r.getMessage() for r in caplog.records if "plc-sim:" in r.getMessage()]
     assert len(lines) == 1, "one line per period, not one per write"
-    assert lines[0].startswith("plc-sim: 20 writes; last (registers 0-42): seq 42 count 1 x 512.2 mm")
+    assert lines[0].startswith("plc-sim: 20 writes; block (registers 0-44): seq 42 count 1 x 512.2 mm")
 
 
 @pytest.mark.parametrize("size", [10, 70000])
 def test_simulator_refuses_a_map_that_does_not_fit(size):
     with pytest.raises(ValueError, match="registers"):
         PlcSimulator(registers=size)
+
+
+@pytest.mark.parametrize("ms", ["0", "-5", "nan"])
+def test_plc_sim_bad_arm_period_is_exit_2(ms, capsys):
+    assert main(["plc-sim", "--port", "0", "--arm-every", ms]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("tracker: error: --arm-every: expected 1-3600000 ms"), lines

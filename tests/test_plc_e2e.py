@@ -81,8 +81,8 @@ def test_cli_run_to_plc_sim_read_back_with_mbpoll(scene_dir, tmp_path, order, ma
 
         big = order == "ABCD"
         floats = mbpoll(port, 12, 15, "4:float", big_endian=big)
-        raw = mbpoll(port, 0, 43, "4:hex", big_endian=big)
-        words = [int(raw[i], 16) for i in range(43)]
+        raw = mbpoll(port, 0, 45, "4:hex", big_endian=big)
+        words = [int(raw[i], 16) for i in range(45)]
         ints = mbpoll(port, 4, 4, "4:int", big_endian=big)
         want = np.array(expected_floats(obj), dtype=np.float32)
         # mbpoll prints 6 significant digits ...
@@ -115,10 +115,10 @@ def test_seq_counts_poses_and_heartbeat_advances(rendered, tmp_path):
         opts = PlcOptions("127.0.0.1", sim.port)
         writer = PlcWriter(ModbusLink(opts), opts, Health())
         # Before any part is in view the heartbeat must already move: hold the camera until it did.
-        hooks = {5: lambda: wait_until(lambda: sim.write_count >= 3, "heartbeat writes without parts")}
+        hooks = {5: lambda: wait_until(lambda: len(sim.writes(0)) >= 3, "heartbeat writes without parts")}
         poses = tmp_path / "poses.jsonl"
         summary = run_loop(ScriptedCamera(rendered, hooks), [PoseSink(str(poses)), writer])
-        blocks = [decode_block(w.values, WordOrder.ABCD) for w in sim.history]
+        blocks = [decode_block(w.values, WordOrder.ABCD) for w in sim.writes(0)]
     assert summary.frames == 100 and writer.stats.submitted == 100
     assert blocks[0]["seq"] == 0 and blocks[0]["count"] == 0 and blocks[0]["status"] & 1
     xs = {float(np.float32(o["x_mm"])) for p in read_poses(poses) for o in p["objects"]}
@@ -139,8 +139,8 @@ def test_heartbeat_without_any_pose():
         opts = PlcOptions("127.0.0.1", sim.port)
         writer = PlcWriter(ModbusLink(opts), opts, Health())
         try:
-            wait_until(lambda: sim.write_count >= 4, "four heartbeat writes")
-            blocks = [decode_block(w.values, WordOrder.ABCD) for w in list(sim.history)[:4]]
+            wait_until(lambda: len(sim.writes(0)) >= 4, "four heartbeat writes")
+            blocks = [decode_block(w.values, WordOrder.ABCD) for w in sim.writes(0)[:4]]
             assert writer.status().startswith("PLC ok") and "seq 0" in writer.status()
             assert writer.link._client.socket.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY)
         finally:
@@ -170,7 +170,7 @@ def test_server_mode_serves_the_map_for_the_arm(rendered):
     def poll_as_the_arm():
         newest = source.arrival_ns[-1] // 1_000_000 & 0xFFFFFFFF
         def current():
-            seen["words"] = [int(v, 16) for v in mbpoll(port, 10, 43, "4:hex", big_endian=False).values()]
+            seen["words"] = [int(v, 16) for v in mbpoll(port, 10, 45, "4:hex", big_endian=False).values()]
             return decode_block(seen["words"], WordOrder.CDAB)["t_capture_ms"] == newest
         wait_until(current, "the served map to hold the newest pose", DEADLINE_S)
 

@@ -11,7 +11,7 @@ import threading
 from pathlib import Path
 
 from tracker import calibration as calib_io
-from tracker.cli_types import CAMERA_INDEX_MAX, FPS, FRAME_COUNT
+from tracker.cli_types import CAMERA_INDEX_MAX, FPS, FRAME_COUNT, endpoint
 from tracker.config import TrackerConfig
 from tracker.errors import BadInput, SourceError
 from tracker.health import Health
@@ -33,7 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--source", help="camera index, video file, printf image pattern or .mcap recording")
     p.add_argument("--calibration", help="calibration file (.yaml/.yml/.xml); a .mcap source carries its own")
     plc = p.add_mutually_exclusive_group()
-    plc.add_argument("--plc", metavar="HOST:PORT", help="write poses to this Modbus TCP server")
+    plc.add_argument("--plc", metavar="HOST:PORT", type=endpoint, help="write poses to this Modbus TCP server")
     plc.add_argument("--no-plc", action="store_true", help="do not talk to a PLC")
     p.add_argument("--plc-unit", type=int, default=1, help="Modbus unit id (default 1)")
     p.add_argument("--plc-base", type=int, default=0, help="register base address (default 0)")

@@ -32,3 +32,11 @@ FPS = number(0.01, 100_000.0)
 FRAME_COUNT = number(1, 2**62, integer=True)
 # Camera indices OpenCV accepts (a larger number is a typo, not a device).
 CAMERA_INDEX_MAX = 1023
+
+
+def endpoint(text: str) -> str:
+    """HOST:PORT, not empty (the full check, with the PLC's own messages, is plc.options.parse_endpoint):
+    an empty --plc must not silently mean "no PLC"."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT (e.g. 192.168.0.10:502), got {text!r}")
+    return text

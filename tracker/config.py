@@ -126,8 +126,17 @@ class TrackConfig:
     initial_angular_rate_sigma_deg_s: float = 100.0
     # A measurement farther than this from a track's prediction starts a new track.
     gate_mm: float = 30.0
-    # A track with no blob at all for this many frames ends.
+    # A young track (fewer than coast_min_hits measurements) with no blob for this many frames ends:
+    # a one-off false detection is not kept (and listed to the PLC) for long.
     max_missed_frames: int = 5
+    # An established track with no blob keeps its id this long while it is predicted in view: an arm
+    # passing over a part hides it for 0.3-0.5 s, and the part must come back under the same id.
+    max_coast_s: float = 0.6
+    # Measurements that make a track established (allowed to coast for max_coast_s).
+    coast_min_hits: int = 3
+    # ... and it must move with the belt: a still blob that vanishes (the ghost of a part that was in
+    # view at start, a part lifted off a stopped belt) ends after max_missed_frames like a young track.
+    coast_min_speed_mm_s: float = 20.0
 
     def __post_init__(self) -> None:
         _positive(self, *(f.name for f in fields(self)))

@@ -15,7 +15,7 @@ from typing import Protocol, TextIO
 
 import numpy as np
 
-from tracker.errors import FrameSizeError, SourceLost, TrackerError
+from tracker.errors import FrameSizeError, SourceLost
 from tracker.health import FAULT_CAMERA_LOST, FAULT_FRAME_SIZE, FAULT_OVERRUN, FAULT_SCENE, FAULT_TEXT, Health
 from tracker.pipeline import Pipeline
 from tracker.poses import FrameResult
@@ -227,7 +227,7 @@ class Runner:
         for sink in self.sinks:
             try:
                 sink.close()
-            except TrackerError as exc:
+            except Exception as exc:  # noqa: BLE001 - every other sink still closes (the PLC's final block)
                 errors.append(exc)
         self.source.close()
         if errors:

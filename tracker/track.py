@@ -21,7 +21,10 @@ class Track:
         self.id = track_id
         self.kf = make_filter(np.array([r.x_mm, r.y_mm, r.angle_deg, r.length_mm, r.width_mm]), cfg)
         self.t_ns = t_ns
-        self.missed = 0
+        self.missed = 0  # consecutive frames without any blob
+        self.hits = 1  # frames with a measurement
+        self.seen_ns = t_ns  # time of the last frame with a blob (clipped or not)
+        self.age_frames = 0  # frames since the last (unclipped) measurement
 
     @property
     def position(self) -> np.ndarray:
@@ -64,8 +67,16 @@ class Track:
         corners = rectangle_corners(x[X], x[Y], x[ANGLE], x[LENGTH], x[WIDTH])
         return TrackedObject(
             self.id, float(x[X]), float(x[Y]), float(x[ANGLE]), float(x[LENGTH]), float(x[WIDTH]),
-            corners, float(x[VX]), float(x[VY]), measured is not None, measured,
+            corners, float(x[VX]), float(x[VY]), measured is not None, measured, age_frames=self.age_frames,
         )
+
+    def ended(self, t_ns: int, cfg: TrackConfig) -> bool:
+        """No blob for too long: time for an established track moving with the belt (a part an arm passes
+        over), frames for any other."""
+        speed = math.hypot(float(self.kf.x[VX, 0]), float(self.kf.x[VY, 0]))
+        if self.hits < cfg.coast_min_hits or speed < cfg.coast_min_speed_mm_s:
+            return self.missed > cfg.max_missed_frames
+        return t_ns - self.seen_ns > cfg.max_coast_s * 1e9
 
 
 class Tracker:
@@ -106,14 +117,18 @@ class Tracker:
             if m is None:
                 track.missed += 1
                 x, y = track.position
-                if track.missed > cfg.max_missed_frames or not self._in_view(float(x), float(y)):
+                if track.ended(t_ns, cfg) or not self._in_view(float(x), float(y)):
                     continue
             else:
                 track.missed = 0
+                track.seen_ns = t_ns
             if m is not None and not m.clipped:
                 track.update(m)
+                track.hits += 1
+                track.age_frames = 0
                 out.append(track.output(m))
             else:
+                track.age_frames += 1
                 out.append(track.output(None))
             alive.append(track)
         for mi, m in enumerate(measurements):

@@ -1,0 +1,75 @@
+"""A part hidden for a few frames (an arm passing over it) keeps its id; frames since last measured are counted."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from tracker.config import TrackConfig, TrackerConfig
+from tracker.pipeline import Pipeline
+from tracker.scenes import resized
+from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec
+
+FPS = 30.0
+HIDDEN = range(40, 52)  # 12 frames = 0.4 s: part A is covered (rendered without it)
+
+
+def _scene(parts: tuple[PartSpec, ...]) -> SceneSpec:
+    scene = SceneSpec(CameraSpec(), parts, fps=FPS, n_frames=70, supersample=2, blur_samples=1)
+    return resized(scene, 320, 240)
+
+
+A = PartSpec(80, 50, 0, -480, -90, 20, 300, 0)
+B = PartSpec(70, 40, 0, -560, 110, -30, 300, 0, intensity=180)
+
+
+def _track(n_frames: int, config: TrackerConfig | None = None) -> tuple[list, list]:
+    both, only_b = Renderer(_scene((A, B))), Renderer(_scene((B,)))
+    pipeline = Pipeline(both.calibration, config)
+    results, truths = [], []
+    for i in range(n_frames):
+        image, truth = both.render(i)
+        if i in HIDDEN:
+            image = only_b.render(i)[0]
+        results.append(pipeline.process(i, image, both.scene.t_ns(i)))
+        truths.append(truth)
+    return results, truths
+
+
+@pytest.fixture(scope="module")
+def run():
+    return _track(70)
+
+
+def _nearest(result, x: float, y: float):
+    return min(result.objects, key=lambda o: (o.x_mm - x) ** 2 + (o.y_mm - y) ** 2)
+
+
+def test_hidden_part_keeps_its_id_and_reports_its_age(run):
+    results, truths = run
+    before = HIDDEN.start - 1
+    ta = truths[before]["objects"][0]
+    a_id = _nearest(results[before], ta["x_mm"], ta["y_mm"]).id
+    assert results[before].objects and all(o.age_frames == 0 for o in results[before].objects if o.id == a_id)
+    for k, i in enumerate(HIDDEN, start=1):
+        a = next((o for o in results[i].objects if o.id == a_id), None)
+        assert a is not None, f"frame {i}: the hidden part's track ended"
+        assert not a.measured and a.age_frames == k
+        t = truths[i]["objects"][0]
+        assert abs(a.x_mm - t["x_mm"]) < 5.0, "coasting follows the belt"
+    after = HIDDEN.stop + 2
+    t = truths[after]["objects"][0]
+    back = _nearest(results[after], t["x_mm"], t["y_mm"])
+    assert back.id == a_id and back.measured and back.age_frames == 0
+    assert abs(back.x_mm - t["x_mm"]) < 1.0 and abs(back.y_mm - t["y_mm"]) < 1.0
+    # No other id was ever given to part A or B: two parts, two ids.
+    assert {o.id for r in results for o in r.objects} == {a_id, _nearest(results[after], *(
+        truths[after]["objects"][1][k] for k in ("x_mm", "y_mm"))).id}
+
+
+def test_a_track_still_ends_when_hidden_longer_than_the_coast_time():
+    # The same scene with the coast time shorter than the 0.4 s hiding: A comes back under a new id.
+    cfg = dataclasses.replace(TrackerConfig(), track=TrackConfig(max_coast_s=0.2))
+    results, _ = _track(HIDDEN.stop + 3, cfg)
+    assert len({o.id for r in results for o in r.objects}) == 3
