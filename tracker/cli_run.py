@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import signal
@@ -11,7 +12,7 @@ import threading
 from pathlib import Path
 
 from tracker import calibration as calib_io
-from tracker.cli_types import CAMERA_INDEX_MAX, FPS, FRAME_COUNT, endpoint
+from tracker.cli_types import CAMERA_INDEX_MAX, FPS, FRAME_COUNT, endpoint, part_height
 from tracker.config import TrackerConfig
 from tracker.errors import BadInput, SourceError
 from tracker.health import Health
@@ -48,6 +49,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "container; it does not limit speed: see --realtime)")
     p.add_argument("--realtime", action="store_true",
                    help="play a file or recording at its recorded rate, like a camera (the demo does)")
+    p.add_argument("--part-height", type=part_height, default=None, metavar="MM|auto",
+                   help="every part is a box this many mm tall (its footprint's pose is fitted to the box's "
+                        "outline); auto (the default) takes measure.part_height_mm from the settings "
+                        "(0: flat parts) -- estimating each part's height is not implemented yet")
     p.add_argument("--config", metavar="FILE.json", help="pipeline settings (see tracker/config.py)")
     p.add_argument("--max-frames", type=FRAME_COUNT, help="stop after this many frames (>= 1)")
     p.add_argument("--quiet", action="store_true", help="no live status line")
@@ -168,6 +173,9 @@ def run(args: argparse.Namespace) -> int:
     given_config = load_config(args.config) if args.config else None
     source, calibration, recorded_config = open_inputs(args)
     config = given_config or recorded_config or TrackerConfig()
+    if args.part_height is not None:
+        config = dataclasses.replace(config, measure=dataclasses.replace(config.measure,
+                                                                         part_height_mm=args.part_height))
     health = Health()
     stop = threading.Event()
     staged: list[StagedFile] = []

@@ -40,3 +40,13 @@ def endpoint(text: str) -> str:
     if not text.strip():
         raise argparse.ArgumentTypeError(f"expected HOST:PORT (e.g. 192.168.0.10:502), got {text!r}")
     return text
+
+
+def part_height(text: str) -> float | None:
+    """``--part-height``: a height in mm (0 to 5000), or ``auto`` (None)."""
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        return float(number(0.0, 5000.0)(text))
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected a height in mm from 0 to 5000 or 'auto', got {text!r}") from None

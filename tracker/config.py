@@ -104,9 +104,12 @@ class MeasureConfig:
     side_band_px: float = 1.5
     # Minimum |part - belt| contrast (grey levels) for a sub-pixel measurement.
     min_contrast: float = 20.0
+    # With a part height: a box outline fitting its edge points worse than this (px RMS) means
+    # the part is no box (a cylinder lying down, a bag); its top-face rectangle is kept instead.
+    box_max_rms_px: float = 1.0
 
     def __post_init__(self) -> None:
-        _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast")
+        _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "box_max_rms_px")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
 

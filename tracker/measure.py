@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from tracker.box import BoxCamera
+from tracker.boxfit import fit_box
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
 from tracker.undistort import BeltMapper
@@ -55,6 +57,9 @@ class Measurer:
         # Conservative pixel-area pre-filter, so tiny specks are never mapped at all.
         self._min_area_px = 0.5 * config.min_area_mm2 / mapper.max_mm_per_px() ** 2
         self._mm_per_px = mapper.calibration.mm_per_px_at_centre()
+        self._box_camera = BoxCamera(mapper.calibration)
+        # A box outline that misses its edge points by more than this (px RMS) is no box.
+        self._max_rms_norm = config.box_max_rms_px / float(mapper.calibration.camera_matrix[0, 0])
 
     def __call__(self, frame: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> list[Measurement]:
         """Measure every blob of ``mask``; ``reference`` is the empty belt (float32 or uint8)."""
@@ -88,8 +93,12 @@ class Measurer:
             points_px = contour.reshape(-1, 2).astype(np.float64)
             rect = min_area_rect(hull_mm)
         else:
-            pts_mm = self.mapper.to_mm(points_px)
+            norm, pts_mm = self.mapper.to_norm_and_mm(points_px)
             rect = refine_rect(pts_mm, min_area_rect(pts_mm), band=cfg.side_band_px * self._mm_per_px)
+            if cfg.part_height_mm > 0:
+                # A box: its side faces are part of the silhouette; fit the box's outline instead.
+                box = fit_box(self._box_camera, norm, rect, cfg.part_height_mm, self._max_rms_norm)
+                rect = box if box is not None else rect
         centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
         return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px))
 
@@ -125,8 +134,9 @@ class Measurer:
         # not (shading), so the contrast is taken per pixel against the local reference.
         part_level = _median_u8(levels, inner)
         inside = blob > 0
-        rows = _boundary_crossings(img8, belt_level, part_level, inside, cfg.min_contrast, k)
-        cols = _boundary_crossings(img8.T, belt_level.T, part_level, inside.T, cfg.min_contrast, k)
+        local = cfg.part_height_mm > 0
+        rows = _boundary_crossings(img8, belt_level, part_level, inside, cfg.min_contrast, k, local)
+        cols = _boundary_crossings(img8.T, belt_level.T, part_level, inside.T, cfg.min_contrast, k, local)
         if rows is None or cols is None:
             return None
         points = np.concatenate([rows, cols[:, ::-1]])
@@ -151,13 +161,15 @@ def _median_u8(image: np.ndarray, mask: np.ndarray) -> float:
 
 
 def _boundary_crossings(img8: np.ndarray, belt: np.ndarray, part_level: float, inside: np.ndarray,
-                        min_contrast: float, half_window: int) -> np.ndarray | None:
+                        min_contrast: float, half_window: int, local: bool = False) -> np.ndarray | None:
     """Sub-pixel edge positions where each row crosses the blob's outer boundary: Nx2 (col, row).
 
     The window of each crossing starts at the blob's first (last) pixel of the row and
     reaches ``half_window`` pixels to either side. Only rows where the boundary is within
     ~63 deg of vertical are used (the window then holds the whole transition); the
     transposed call takes the other edges. None when the contrast is too low to trust.
+    ``local``: the part's level is read just inside each crossing instead of ``part_level``
+    (a box's side faces are shaded unlike its top, and they bound the silhouette too).
     """
     k = half_window
     n_rows, n_cols = inside.shape
@@ -182,7 +194,9 @@ def _boundary_crossings(img8: np.ndarray, belt: np.ndarray, part_level: float, i
         if not len(rr):
             continue
         belt_w = belt[rr[:, None], cols]
-        contrast = part_level - belt_w
+        # The face next to the edge: the first pixel wholly inside, one past the boundary pixel.
+        level = img8[rr, cols[:, k + 1] if rising else cols[:, k - 2]][:, None] if local else part_level
+        contrast = level - belt_w
         if np.min(np.abs(contrast)) < min_contrast:
             return None
         cover = (img8[rr[:, None], cols] - belt_w) / contrast

@@ -15,6 +15,7 @@ import numpy as np
 
 from tracker.calibration import Calibration
 from tracker.config import TrackerConfig
+from tracker.errors import BadInput
 from tracker.measure import HALF_WINDOW_PX, Measurer
 from tracker.poses import FrameResult
 from tracker.segment import make_segmenter
@@ -32,6 +33,10 @@ class Pipeline:
         calibration.require_belt()
         self.calibration = calibration
         self.config = config or TrackerConfig()
+        self._height_mm = self.config.measure.part_height_mm
+        if self._height_mm >= calibration.camera_height_mm():
+            raise BadInput(f"part height: expected less than the camera's height above the belt "
+                           f"({calibration.camera_height_mm():.0f} mm), got {self._height_mm:g} mm")
         seg = self.config.segment
         # The region of interest as an image polygon (pixels; None: the whole frame), for previews.
         self.roi_px = roi_polygon_px(seg, calibration)
@@ -81,6 +86,8 @@ class Pipeline:
                             for m in measurements]
         t2 = clock()
         objects = self._track(measurements, t_ns, belt)
+        if self._height_mm:
+            objects = tuple(dataclasses.replace(o, height_mm=self._height_mm) for o in objects)
         t3 = clock()
         undistort = self.mapper.spent_ns - undistort_before
         self.stage_ns.update(segment=t1 - t0, undistort=undistort, measure=t2 - t1 - undistort, track=t3 - t2)
