@@ -22,6 +22,7 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench.py
+	$(BIN)/python bench/real_videos.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache
