@@ -37,9 +37,9 @@ def runs(videos_dir):
 
 
 _MIXED_OPEN = pytest.mark.xfail(strict=True, reason=(
-    "open: 7/7 parts as one track each, but 2 phantoms (the bright folded edge of the pale sheet in view at "
-    "start, frames 0-79; the low-contrast grey part's leading piece as it enters, frames 366-386), so counts "
-    "are right at 6/8 sample frames"))
+    "open: 7/7 parts as one track each, but the pale sheet in view at start (labelled 'not a part', never "
+    "wholly visible) shows a bright folded edge that is tracked in pieces (3 phantoms, frames 0-79), so counts "
+    "are right at 6/8 sample frames (frames 0 and 59)"))
 
 
 @pytest.mark.parametrize("video", [WHITE, pytest.param(MIXED, marks=_MIXED_OPEN)],

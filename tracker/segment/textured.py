@@ -67,6 +67,11 @@ class TexturedSegmenter:
         # Any working pixel touching the region belongs to it (the full mask is cut to the region later).
         _, self._roi_small = cv2.threshold(self._roi_small, 0, 255, cv2.THRESH_BINARY)
         self._kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (3, 3))
+        # How much of each working pixel's smoothing window lies in the region (None: all of it).
+        self._weight = None
+        if cv2.countNonZero(roi) < roi.size:
+            weight = cv2.resize(roi, self._work, interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
+            self._weight = np.maximum(cv2.GaussianBlur(weight, (3, 3), 0.8), 1e-3)
         # Foreground thinner than this (working pixels) is a streak or seam across the belt, no part.
         thin = max(_MIN_PART_WORK_PX, int(config.min_part_mm / mm_per_px * self._scale))
         self._thin = cv2.getStructuringElement(cv2.MORPH_RECT, (thin, thin))
@@ -94,8 +99,15 @@ class TexturedSegmenter:
         return None if self.mean is None else UpsampledView(self.mean, self._size, self._scale)
 
     def _smooth(self, frame: np.ndarray) -> np.ndarray:
+        """The frame averaged down and blurred, over the region only: what lies outside it (letterbox
+        bars, rails) is not blended into the region's edge (normalised by the region's own weight)."""
+        if self._weight is not None:
+            frame = cv2.bitwise_and(frame, self._roi)
         small = cv2.resize(frame, self._work, interpolation=cv2.INTER_AREA).astype(np.float32)
-        return cv2.GaussianBlur(small, (3, 3), 0.8)
+        small = cv2.GaussianBlur(small, (3, 3), 0.8)
+        if self._weight is not None:
+            small = cv2.divide(small, self._weight)
+        return small
 
     def __call__(self, frame: np.ndarray) -> np.ndarray:
         cfg = self.config
