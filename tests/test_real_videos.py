@@ -37,9 +37,9 @@ def runs(videos_dir):
 
 
 _MIXED_OPEN = pytest.mark.xfail(strict=True, reason=(
-    "open: 7/7 parts as one track each, but the pale sheet in view at start (labelled 'not a part', never "
-    "wholly visible) shows a bright folded edge that is tracked in pieces (3 phantoms, frames 0-79), so counts "
-    "are right at 6/8 sample frames (frames 0 and 59)"))
+    "open: 7/7 parts as one track each and counts right at 8/8 sample frames, but one phantom: a piece of the "
+    "pale sheet in view at start (labelled 'not a part', never wholly visible) with a part's contrast, "
+    "tracked for 14 frames (3-16)"))
 
 
 @pytest.mark.parametrize("video", [WHITE, pytest.param(MIXED, marks=_MIXED_OPEN)],

@@ -161,7 +161,10 @@ class TexturedSegmenter:
                 continue
             box = (slice(y, y + bh), slice(x, x + bw))
             inside = labels[box] == i
-            half = 0.5 * float(np.percentile(contrast[box][inside], _BLOB_LEVEL_PERCENTILE))
+            level = float(np.percentile(contrast[box][inside], _BLOB_LEVEL_PERCENTILE))
+            if level < self.config.min_part_contrast:
+                continue  # too faint for a part: a stain, a sheet, light on the belt
+            half = 0.5 * level
             points = cv2.findNonZero(inside.astype(np.uint8))
             hull = (cv2.convexHull(points).reshape(-1, 2) + (x, y) + 0.5) / scale - 0.5
             # The band one working pixel around the hull, at full resolution.
