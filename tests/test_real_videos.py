@@ -36,14 +36,7 @@ def runs(videos_dir):
     return get
 
 
-_MIXED_OPEN = pytest.mark.xfail(strict=True, reason=(
-    "open: 7/7 parts as one track each and counts right at 8/8 sample frames, but one phantom: a piece of the "
-    "pale sheet in view at start (labelled 'not a part', never wholly visible) with a part's contrast, "
-    "tracked for 14 frames (3-16)"))
-
-
-@pytest.mark.parametrize("video", [WHITE, pytest.param(MIXED, marks=_MIXED_OPEN)],
-                         ids=["white_parts_black_belt", "mixed_items_grey_belt"])
+@pytest.mark.parametrize("video", [WHITE, MIXED], ids=["white_parts_black_belt", "mixed_items_grey_belt"])
 def test_every_labelled_part_is_one_track_and_nothing_is_invented(video, runs, videos_dir):
     truth = load_truth(videos_dir, video)
     s = score(runs(video).results, truth, video.last_frame)
