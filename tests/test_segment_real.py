@@ -14,7 +14,7 @@ from tracker.errors import BadInput
 from tracker.health import FAULT_SCENE, Health
 from tracker.pipeline import Pipeline
 from tracker.poses import FrameResult
-from tracker.runner import Runner
+from tracker.runner import Runner, describe_belt
 from tracker.scenes import nadir
 from tracker.segment.guard import ClutterGuard
 from tracker.segment.roi import roi_polygon_px
@@ -102,8 +102,9 @@ def test_blob_at_the_region_edge_is_clipped():
     assert guarded.at_edge == {(50, 100, 40, 30)}
 
 
-def test_pose_stream_carries_the_belt_velocity_only_where_measured():
-    assert "belt" not in FrameResult(3, 0, ()).to_dict()
+def test_pose_stream_and_status_line_carry_the_belt_velocity_only_where_measured():
+    assert "belt" not in FrameResult(3, 0, ()).to_dict() and describe_belt(FrameResult(3, 0, ())) == ""
+    assert describe_belt(FrameResult(3, 0, (), belt_mm_s=(-84.4, 0.2))) == "belt -84,+0 mm/s"
     line = FrameResult(3, 0, (), belt_mm_s=(-84.123456, 0.5)).to_dict()
     assert line["belt"] == {"vx_mm_s": -84.1235, "vy_mm_s": 0.5}
 

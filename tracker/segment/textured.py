@@ -13,9 +13,9 @@ moves too. Two things stay true while it moves, and this model rests on them:
   where nothing is foreground, so a part that stops with the belt stays a part.
 
 Foreground is where the smoothed level leaves the belt's mean by more than a floor and
-by more than a few of its standard deviations. The working image's margin is scaled up
-(linear interpolation) to a full-resolution mask; ``reference`` is the belt's mean at
-full resolution, for the measurement's sub-pixel edges.
+by more than a few of its standard deviations. Each part's outline is then drawn at full
+resolution where its contrast falls to half its own (``_outline``); ``reference`` is the
+belt's mean seen at full resolution, for the measurement's sub-pixel edges.
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ _STEP_PX = 1.0
 # Learning never stops entirely: a static scene (belt not moving, rollers) still adapts slowly.
 _MIN_STEP = 0.1
 # A foreground blob whose frame content sits this close (mean |level - ring|, in thresholds)
-# to the belt around it, while the belt model inside does not, is a ghost: belt the model
-# learnt wrongly (a part or sheet in view at start, since gone). It joins the belt at once.
+# to the plain belt around it is a ghost: belt the model learnt wrongly (a part or a sheet
+# in view at start, since gone). It joins the belt at once.
 _GHOST_FRACTION = 0.5
 # Radius (working pixels) within which the strongest contrast sets what is half of it.
 _NEAR_WORK_PX = 6
