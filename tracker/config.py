@@ -50,6 +50,10 @@ class SegmentConfig:
     # (grey levels) and by more than textured_sigmas standard deviations of the passing belt there.
     textured_threshold: float = 16.0
     textured_sigmas: float = 4.0
+    # Textured model: a part differs from the belt by at least this much (grey levels, the 90th
+    # percentile of its smoothed contrast); fainter blobs are stains, sheets or light on the belt.
+    # Parts are specified from 30 levels of contrast up.
+    min_part_contrast: float = 28.0
     # Textured model: learning rate of the belt's per-pixel mean and variance per pixel of belt
     # travel (a stopped belt or a duplicate frame brings no new belt, so it teaches nothing).
     textured_rate: float = 0.04
@@ -64,7 +68,7 @@ class SegmentConfig:
     def __post_init__(self) -> None:
         _positive(self, "diff_threshold", "motion_threshold", "background_every",
                   "absorb_after_frames", "open_kernel_px", "max_blobs", "textured_work_px",
-                  "textured_threshold", "textured_sigmas", "textured_edge_blur_px")
+                  "textured_threshold", "textured_sigmas", "min_part_contrast", "textured_edge_blur_px")
         if self.textured_edge_blur_px % 2 == 0:
             raise BadInput(f"segment.textured_edge_blur_px: expected an odd number, got {self.textured_edge_blur_px}")
         if self.model not in SEGMENT_MODELS:

@@ -13,9 +13,9 @@ moves too. Two things stay true while it moves, and this model rests on them:
   where nothing is foreground, so a part that stops with the belt stays a part.
 
 Foreground is where the smoothed level leaves the belt's mean by more than a floor and
-by more than a few of its standard deviations. The working image's margin is scaled up
-(linear interpolation) to a full-resolution mask; ``reference`` is the belt's mean at
-full resolution, for the measurement's sub-pixel edges.
+by more than a few of its standard deviations. Each part's outline is then drawn at full
+resolution where its contrast falls to half its own (``_outline``); ``reference`` is the
+belt's mean seen at full resolution, for the measurement's sub-pixel edges.
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ _STEP_PX = 1.0
 # Learning never stops entirely: a static scene (belt not moving, rollers) still adapts slowly.
 _MIN_STEP = 0.1
 # A foreground blob whose frame content sits this close (mean |level - ring|, in thresholds)
-# to the belt around it, while the belt model inside does not, is a ghost: belt the model
-# learnt wrongly (a part or sheet in view at start, since gone). It joins the belt at once.
+# to the plain belt around it is a ghost: belt the model learnt wrongly (a part or a sheet
+# in view at start, since gone). It joins the belt at once.
 _GHOST_FRACTION = 0.5
 # Radius (working pixels) within which the strongest contrast sets what is half of it.
 _NEAR_WORK_PX = 6
@@ -67,6 +67,11 @@ class TexturedSegmenter:
         # Any working pixel touching the region belongs to it (the full mask is cut to the region later).
         _, self._roi_small = cv2.threshold(self._roi_small, 0, 255, cv2.THRESH_BINARY)
         self._kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (3, 3))
+        # How much of each working pixel's smoothing window lies in the region (None: all of it).
+        self._weight = None
+        if cv2.countNonZero(roi) < roi.size:
+            weight = cv2.resize(roi, self._work, interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
+            self._weight = np.maximum(cv2.GaussianBlur(weight, (3, 3), 0.8), 1e-3)
         # Foreground thinner than this (working pixels) is a streak or seam across the belt, no part.
         thin = max(_MIN_PART_WORK_PX, int(config.min_part_mm / mm_per_px * self._scale))
         self._thin = cv2.getStructuringElement(cv2.MORPH_RECT, (thin, thin))
@@ -94,8 +99,15 @@ class TexturedSegmenter:
         return None if self.mean is None else UpsampledView(self.mean, self._size, self._scale)
 
     def _smooth(self, frame: np.ndarray) -> np.ndarray:
+        """The frame averaged down and blurred, over the region only: what lies outside it (letterbox
+        bars, rails) is not blended into the region's edge (normalised by the region's own weight)."""
+        if self._weight is not None:
+            frame = cv2.bitwise_and(frame, self._roi)
         small = cv2.resize(frame, self._work, interpolation=cv2.INTER_AREA).astype(np.float32)
-        return cv2.GaussianBlur(small, (3, 3), 0.8)
+        small = cv2.GaussianBlur(small, (3, 3), 0.8)
+        if self._weight is not None:
+            small = cv2.divide(small, self._weight)
+        return small
 
     def __call__(self, frame: np.ndarray) -> np.ndarray:
         cfg = self.config
@@ -149,7 +161,10 @@ class TexturedSegmenter:
                 continue
             box = (slice(y, y + bh), slice(x, x + bw))
             inside = labels[box] == i
-            half = 0.5 * float(np.percentile(contrast[box][inside], _BLOB_LEVEL_PERCENTILE))
+            level = float(np.percentile(contrast[box][inside], _BLOB_LEVEL_PERCENTILE))
+            if level < self.config.min_part_contrast:
+                continue  # too faint for a part: a stain, a sheet, light on the belt
+            half = 0.5 * level
             points = cv2.findNonZero(inside.astype(np.uint8))
             hull = (cv2.convexHull(points).reshape(-1, 2) + (x, y) + 0.5) / scale - 0.5
             # The band one working pixel around the hull, at full resolution.
