@@ -52,3 +52,15 @@ def test_part_height_option_is_validated(scene_dir, capsys):
     assert main([*base, "--part-height", "-3"]) == 2
     assert "--part-height: expected a height in mm" in capsys.readouterr().err
     assert main([*base, "--part-height", "auto", "--max-frames", "2"]) == 0
+
+
+def test_auto_estimates_a_tall_box_seen_at_a_tilt():
+    # --part-height auto: the box's height free in the outline fit, views combined per track.
+    scene = _box_scene(60, 20)
+    poses, truths = run_pipeline(scene, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
+    heights = [o["height_mm"] for p in poses for o in p["objects"] if o["measured"]]
+    assert len(heights) > 40
+    third = heights[len(heights) // 3:]
+    assert max(abs(h - 60.0) for h in third) <= 0.5, third
+    s = evaluate(poses, truths, skip_first=2).summary()
+    assert s["centroid_mean_mm"] <= 0.2 and s["angle_mean_deg"] <= 0.05, s

@@ -51,8 +51,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="play a file or recording at its recorded rate, like a camera (the demo does)")
     p.add_argument("--part-height", type=part_height, default=None, metavar="MM|auto",
                    help="every part is a box this many mm tall (its footprint's pose is fitted to the box's "
-                        "outline); auto (the default) takes measure.part_height_mm from the settings "
-                        "(0: flat parts) -- estimating each part's height is not implemented yet")
+                        "outline); auto: each part's height is estimated as it crosses the view. Without "
+                        "the option: the settings (measure.part_height_mm, measure.estimate_height)")
     p.add_argument("--config", metavar="FILE.json", help="pipeline settings (see tracker/config.py)")
     p.add_argument("--max-frames", type=FRAME_COUNT, help="stop after this many frames (>= 1)")
     p.add_argument("--quiet", action="store_true", help="no live status line")
@@ -173,9 +173,11 @@ def run(args: argparse.Namespace) -> int:
     given_config = load_config(args.config) if args.config else None
     source, calibration, recorded_config = open_inputs(args)
     config = given_config or recorded_config or TrackerConfig()
-    if args.part_height is not None:
-        config = dataclasses.replace(config, measure=dataclasses.replace(config.measure,
-                                                                         part_height_mm=args.part_height))
+    if args.part_height == "auto":
+        config = dataclasses.replace(config, measure=dataclasses.replace(config.measure, estimate_height=True))
+    elif args.part_height is not None:
+        height = {"part_height_mm": args.part_height, "estimate_height": False}
+        config = dataclasses.replace(config, measure=dataclasses.replace(config.measure, **height))
     health = Health()
     stop = threading.Event()
     staged: list[StagedFile] = []

@@ -42,10 +42,10 @@ def endpoint(text: str) -> str:
     return text
 
 
-def part_height(text: str) -> float | None:
-    """``--part-height``: a height in mm (0 to 5000), or ``auto`` (None)."""
+def part_height(text: str) -> float | str:
+    """``--part-height``: a height in mm (0 to 5000), or ``"auto"``."""
     if text.strip().lower() == "auto":
-        return None
+        return "auto"
     try:
         return float(number(0.0, 5000.0)(text))
     except argparse.ArgumentTypeError:

@@ -108,6 +108,12 @@ class MeasureConfig:
     side_band_px: float = 1.5
     # Minimum |part - belt| contrast (grey levels) for a sub-pixel measurement.
     min_contrast: float = 20.0
+    # Estimate each part's height from how its silhouette changes as it crosses the view (the
+    # box's outline fitted with the height free; views combined per track by their certainty),
+    # starting from part_height_mm. What --part-height auto turns on.
+    estimate_height: bool = False
+    # Heights (mm) the estimate starts from, the best fit kept.
+    height_starts_mm: tuple = (0.0, 20.0, 60.0)
     # With a part height: a box outline fitting its edge points worse than this (px RMS) means
     # the part is no box (a cylinder lying down, a bag); its top-face rectangle is kept instead.
     box_max_rms_px: float = 1.0
@@ -144,6 +150,8 @@ class TrackConfig:
     # ... and it must move with the belt: a still blob that vanishes (the ghost of a part that was in
     # view at start, a part lifted off a stopped belt) ends after max_missed_frames like a young track.
     coast_min_speed_mm_s: float = 20.0
+    # A track's height estimate is converged once its 1-sigma uncertainty is below this (mm).
+    height_converged_sigma_mm: float = 0.3
 
     def __post_init__(self) -> None:
         _positive(self, *(f.name for f in fields(self)))

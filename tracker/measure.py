@@ -11,6 +11,7 @@ rectangle is still a rectangle.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -42,6 +43,9 @@ class Measurement:
     # Image pixel of the centroid (for drawing), distorted coordinates.
     centroid_px: tuple[float, float]
     edge_points: int
+    # The part's height from this view when estimated (with its 1-sigma uncertainty), else None.
+    height_mm: float | None = None
+    height_sigma_mm: float = math.inf
 
 
 class Measurer:
@@ -86,6 +90,7 @@ class Measurer:
         if cv2.contourArea(hull_mm.astype(np.float32)) < cfg.min_area_mm2:
             return None
         points_px = None
+        height: tuple[float | None, float] = (None, math.inf)
         if cfg.subpixel and not clipped:
             points_px = self._edge_points(frame, reference, contour, (x, y, w, h))
         if points_px is None or len(points_px) < 12:
@@ -95,12 +100,26 @@ class Measurer:
         else:
             norm, pts_mm = self.mapper.to_norm_and_mm(points_px)
             rect = refine_rect(pts_mm, min_area_rect(pts_mm), band=cfg.side_band_px * self._mm_per_px)
-            if cfg.part_height_mm > 0:
+            if cfg.part_height_mm > 0 or cfg.estimate_height:
                 # A box: its side faces are part of the silhouette; fit the box's outline instead.
-                box = fit_box(self._box_camera, norm, rect, cfg.part_height_mm, self._max_rms_norm)
-                rect = box if box is not None else rect
+                box = self._fit_box(norm, rect)
+                if box is not None:
+                    rect = box.rect
+                    if cfg.estimate_height:
+                        height = (box.height_mm, box.height_sigma_mm)
         centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
-        return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px))
+        return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px), *height)
+
+    def _fit_box(self, norm: np.ndarray, rect: Rect):
+        cfg = self.config
+        if not cfg.estimate_height:
+            return fit_box(self._box_camera, norm, rect, cfg.part_height_mm, self._max_rms_norm)
+        # The height is found from several starts: from a flat start the fit may stay flat (a
+        # larger flat rectangle explains a box's silhouette almost as well).
+        fits = [fit_box(self._box_camera, norm, rect, h, self._max_rms_norm, free_height=True)
+                for h in cfg.height_starts_mm]
+        fits = [f for f in fits if f is not None]
+        return min(fits, key=lambda f: f.cost) if fits else None
 
     def _edge_points(self, frame, reference, contour, bbox) -> np.ndarray | None:
         cfg = self.config
@@ -134,7 +153,7 @@ class Measurer:
         # not (shading), so the contrast is taken per pixel against the local reference.
         part_level = _median_u8(levels, inner)
         inside = blob > 0
-        local = cfg.part_height_mm > 0
+        local = cfg.part_height_mm > 0 or cfg.estimate_height
         rows = _boundary_crossings(img8, belt_level, part_level, inside, cfg.min_contrast, k, local)
         cols = _boundary_crossings(img8.T, belt_level.T, part_level, inside.T, cfg.min_contrast, k, local)
         if rows is None or cols is None:

@@ -33,10 +33,11 @@ class Pipeline:
         calibration.require_belt()
         self.calibration = calibration
         self.config = config or TrackerConfig()
-        self._height_mm = self.config.measure.part_height_mm
-        if self._height_mm >= calibration.camera_height_mm():
+        # A given height is reported as such; an estimated one comes from each track.
+        self._height_mm = 0.0 if self.config.measure.estimate_height else self.config.measure.part_height_mm
+        if self.config.measure.part_height_mm >= calibration.camera_height_mm():
             raise BadInput(f"part height: expected less than the camera's height above the belt "
-                           f"({calibration.camera_height_mm():.0f} mm), got {self._height_mm:g} mm")
+                           f"({calibration.camera_height_mm():.0f} mm), got {self.config.measure.part_height_mm:g} mm")
         seg = self.config.segment
         # The region of interest as an image polygon (pixels; None: the whole frame), for previews.
         self.roi_px = roi_polygon_px(seg, calibration)

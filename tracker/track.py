@@ -25,6 +25,17 @@ class Track:
         self.hits = 1  # frames with a measurement
         self.seen_ns = t_ns  # time of the last frame with a blob (clipped or not)
         self.age_frames = 0  # frames since the last (unclipped) measurement
+        # The height from every view so far, weighted by its certainty (1 / sigma^2).
+        self._height_weight = 0.0
+        self._height_sum = 0.0
+        self._converged_sigma_mm = cfg.height_converged_sigma_mm
+        self._add_height(m)
+
+    def _add_height(self, m: Measurement) -> None:
+        if m.height_mm is not None and 0 < m.height_sigma_mm < math.inf:
+            w = 1.0 / m.height_sigma_mm**2
+            self._height_weight += w
+            self._height_sum += w * m.height_mm
 
     @property
     def position(self) -> np.ndarray:
@@ -38,6 +49,7 @@ class Track:
             self._normalise()
 
     def update(self, m: Measurement) -> None:
+        self._add_height(m)
         r = m.rect
         predicted = float(self.kf.x[ANGLE, 0])
         # The rectangle's two axes are both candidates for the tracked "long side":
@@ -65,9 +77,14 @@ class Track:
     def output(self, measured: Measurement | None) -> TrackedObject:
         x = self.kf.x[:, 0]
         corners = rectangle_corners(x[X], x[Y], x[ANGLE], x[LENGTH], x[WIDTH])
+        height, converged = 0.0, True
+        if self._height_weight > 0:
+            height = self._height_sum / self._height_weight
+            converged = self._height_weight ** -0.5 < self._converged_sigma_mm
         return TrackedObject(
             self.id, float(x[X]), float(x[Y]), float(x[ANGLE]), float(x[LENGTH]), float(x[WIDTH]),
-            corners, float(x[VX]), float(x[VY]), measured is not None, measured, age_frames=self.age_frames,
+            corners, float(x[VX]), float(x[VY]), measured is not None, measured, height_mm=height,
+            height_converged=converged, age_frames=self.age_frames,
         )
 
     def ended(self, t_ns: int, cfg: TrackConfig) -> bool:
