@@ -226,7 +226,8 @@ def test_plc_without_queue_registers_gets_the_block_and_one_line(caplog):
     errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
     assert len(errors) == 1 and "registers 100-219 (40101-40220)" in errors[0] and "only registers 0-44" in errors[0]
     assert "PLC ok" in status["text"] and "queue not written: exception 2" in status["text"]
-    assert writer.stats.queue_writes == 0 and max(b["seq"] for b in blocks) >= 10
+    # The block kept coming (how many poses made it depends on the machine's load: latest wins).
+    assert writer.stats.queue_writes == 0 and len(blocks) >= 10 and max(b["seq"] for b in blocks) >= 1
     assert blocks[-1]["status"] & 1 == 0
 
 
