@@ -13,7 +13,8 @@ $(STAMP): pyproject.toml
 
 run: $(STAMP)
 	@echo "make run: to type 'tracker' yourself, run '. $(VENV)/bin/activate' first (or call $(BIN)/tracker)"
-	$(BIN)/tracker run
+	@echo "make run: the live view is at http://127.0.0.1:8080/ while the demo plays"
+	$(BIN)/tracker run --web 127.0.0.1:8080
 
 test: $(STAMP) lint
 	$(BIN)/python -m pytest -q

@@ -123,6 +123,18 @@ class PlcWriter:
             return f"PLC rejected: exception {self._reject_code} ({EXCEPTION_NAMES.get(self._reject_code, '?')})"
         return f"PLC {self.state}"
 
+    def live_state(self) -> dict:
+        """What the PLC was last given, for the live view (read from another thread: a snapshot)."""
+        s = self.stats
+        frame = self._frame
+        return {
+            "link": self.link.name, "state": self.state, "latency_ms": round(s.last_latency_ms, 2),
+            "seq": self._builder.state.seq, "queue_seq": self._queue_seq, "writes": s.writes,
+            "taken": s.taken, "taken_echo": self._echo, "queue_ids": [] if frame is None else
+            [o.id for o in self._order.order(frame.objects, self._taken)][:5],
+            "queue_rejected": self._queue_reject,
+        }
+
     def close(self) -> None:
         """Final block with the running bit cleared (and the newest pose), then stop the thread."""
         self._stop.set()

@@ -53,6 +53,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="every part is a box this many mm tall (its footprint's pose is fitted to the box's "
                         "outline); auto: each part's height is estimated as it crosses the view. Without "
                         "the option: the settings (measure.part_height_mm, measure.estimate_height)")
+    p.add_argument("--web", metavar="HOST:PORT",
+                   help="serve the live view (a read-only web page) there, e.g. 127.0.0.1:8080; "
+                        "give 0.0.0.0:PORT only on a closed cell network")
     p.add_argument("--config", metavar="FILE.json", help="pipeline settings (see tracker/config.py)")
     p.add_argument("--max-frames", type=FRAME_COUNT, help="stop after this many frames (>= 1)")
     p.add_argument("--quiet", action="store_true", help="no live status line")
@@ -189,6 +192,16 @@ def run(args: argparse.Namespace) -> int:
             file.discard()
         source.close()
         raise
+    web = None
+    if args.web:
+        try:
+            web = _web(args.web, calibration, health, sinks, pipeline)
+        except BaseException:
+            for sink in sinks:
+                sink.close()
+            source.close()
+            raise
+        sinks.append(web.view)
     status = None if args.quiet else StatusLine(sys.stderr)
     runner = Runner(source, pipeline, sinks, health, status, stop, args.max_frames)
     previous = _install_signal_handlers(stop)
@@ -196,8 +209,22 @@ def run(args: argparse.Namespace) -> int:
         summary = runner.run()
     finally:
         _restore_signal_handlers(previous)
+        if web is not None:
+            web.close()
     print(f"tracker: {summary.line()}")
     return 0
+
+
+def _web(spec: str, calibration, health: Health, sinks: list, pipeline: Pipeline):
+    """The live view's server on HOST:PORT (tracker/web), started; its sink is ``.view``."""
+    from plc.options import parse_endpoint  # noqa: PLC0415 - the same HOST:PORT rules as --plc
+    from tracker.web import LiveView, WebServer  # noqa: PLC0415 - only with --web
+
+    host, port = parse_endpoint(spec, "--web")
+    view = LiveView(calibration, health, list(sinks), pipeline.roi_px)
+    server = WebServer(view, host, port).start()
+    server.view = view
+    return server
 
 
 def _install_signal_handlers(stop: threading.Event) -> dict:

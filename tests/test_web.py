@@ -1,0 +1,132 @@
+"""The live view (tracker run --web): the page, the annotated image and the state, served by the
+tracker itself; checked over HTTP, with 20 clients at once, and in a real headless Chromium."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+import threading
+import urllib.error
+import urllib.request
+from concurrent.futures import ThreadPoolExecutor
+
+import cv2
+import numpy as np
+import pytest
+from conftest import ROOT
+from plc_support import free_port, wait_until
+
+from tracker.cli import main
+
+DEMO = ROOT / "recordings" / "demo.mcap"
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def _get(url: str, timeout: float = 5.0) -> tuple[int, bytes]:
+    try:
+        with urllib.request.urlopen(url, timeout=timeout) as r:
+            return r.status, r.read()
+    except urllib.error.HTTPError as exc:
+        return exc.code, exc.read()
+
+
+@pytest.fixture(scope="module")
+def live():
+    """The bundled demo played at its recorded rate (8 s) with the live view on a free port."""
+    port = free_port()
+    codes = []
+    thread = threading.Thread(target=lambda: codes.append(main(
+        ["run", "--source", str(DEMO), "--realtime", "--no-plc", "--quiet", "--web", f"127.0.0.1:{port}"])),
+        daemon=True)
+    thread.start()
+    base = f"http://127.0.0.1:{port}/"
+
+    def has_part() -> bool:
+        try:
+            return bool(json.loads(_get(base + "state.json", 1.0)[1])["parts"])
+        except (OSError, ValueError):
+            return False
+
+    wait_until(has_part, "the live view to show a part")
+    yield base
+    thread.join(timeout=30)
+    assert codes == [0]
+
+
+def test_state_updates_and_lists_the_parts(live):
+    first = json.loads(_get(live + "state.json")[1])
+    wait_until(lambda: json.loads(_get(live + "state.json")[1])["frame"] > first["frame"], "a newer frame")
+    part = first["parts"][0]
+    assert {"id", "x_mm", "y_mm", "angle_deg", "length_mm", "width_mm", "height_mm", "measured"} <= part.keys()
+    assert first["health"]["fault"] == 0 and first["health"]["fault_text"] == "none"
+
+
+def test_the_image_shows_each_part_drawn(live):
+    status, data = _get(live + "frame.jpg")
+    assert status == 200
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    assert image is not None and image.shape[1] <= 800
+    # The measured parts' outline colour (green) is drawn: a grey camera image has none of it.
+    b, g, r = (image[..., i].astype(int) for i in range(3))
+    greenish = (g > 150) & (g - r > 80) & (g - b > 80)
+    assert greenish.sum() > 50, greenish.sum()
+
+
+def test_twenty_clients_at_once_and_nothing_but_reading(live):
+    with ThreadPoolExecutor(20) as pool:
+        results = list(pool.map(lambda i: _get(live + ("frame.jpg" if i % 2 else "state.json"))[0], range(20)))
+    assert results == [200] * 20
+    request = urllib.request.Request(live + "state.json", data=b"x", method="POST")
+    try:
+        urllib.request.urlopen(request, timeout=5)
+        code = 200
+    except urllib.error.HTTPError as exc:
+        code = exc.code
+    assert code == 405
+    assert _get(live + "nothing-here")[0] == 404
+
+
+def _chromium(url: str, *args: str) -> subprocess.CompletedProcess:
+    profile = tempfile.mkdtemp(prefix="tracker-chromium-")
+    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+           "--disable-background-networking", "--disable-component-update", "--disable-sync",
+           f"--user-data-dir={profile}", "--window-size=1400,900", "--virtual-time-budget=3000", *args, url]
+    try:
+        return subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    finally:
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if CHROMIUM is None:
+        if os.environ.get("CI"):
+            pytest.fail("chromium is not installed: .ci/run installs it")
+        pytest.skip("chromium is not installed (apt-get install chromium; .ci/run does)")
+    return CHROMIUM
+
+
+def test_in_a_real_browser_the_page_fills_its_tables(live, browser):
+    dom = _chromium(live, "--dump-dom").stdout
+    # The page's own script filled the parts table and the health line from /state.json.
+    assert 'id="frame">' in dom and "waiting for frames" not in dom, dom[:2000]
+    rows = dom.split("<tbody>")[1].split("</tbody>")[0]
+    assert rows.count("<tr>") >= 1 and ("yes" in rows or "predicted" in rows), rows
+
+
+def test_in_a_real_browser_the_screenshot_shows_the_image_with_overlays(live, browser, tmp_path):
+    shot = tmp_path / "page.png"
+    _chromium(live, f"--screenshot={shot}")
+    image = cv2.imread(str(shot), cv2.IMREAD_COLOR)
+    assert image is not None
+    b, g, r = (image[..., i].astype(int) for i in range(3))
+    assert ((g > 150) & (g - r > 80) & (g - b > 80)).sum() > 30, "no part outline on the page"
+
+
+def test_a_bad_web_address_is_one_line(capsys):
+    assert main(["run", "--source", str(DEMO), "--no-plc", "--quiet", "--web", "8080"]) == 2
+    err = capsys.readouterr().err
+    assert "--web: expected HOST:PORT" in err and len(err.strip().splitlines()) == 1
