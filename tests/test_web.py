@@ -130,3 +130,39 @@ def test_a_bad_web_address_is_one_line(capsys):
     assert main(["run", "--source", str(DEMO), "--no-plc", "--quiet", "--web", "8080"]) == 2
     err = capsys.readouterr().err
     assert "--web: expected HOST:PORT" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_live_camera_source_is_shown_as_it_runs():
+    # The one thing tests may stand in for: a physical camera (frames stamped as they arrive).
+    from plc_support import Rendered, ScriptedCamera, small_scene
+
+    from tracker.health import Health
+    from tracker.pipeline import Pipeline
+    from tracker.runner import Runner
+    from tracker.web import LiveView, WebServer
+
+    rendered = Rendered(small_scene(60))
+    health = Health()
+    pipeline = Pipeline(rendered.calibration)
+    view = LiveView(rendered.calibration, health, [], pipeline.roi_px)
+    server = WebServer(view, "127.0.0.1", free_port()).start()
+    seen = []
+
+    def look(frame: int):
+        # The state is rebuilt at most 15 times a second: wait (polling) until it shows this frame.
+        def state():
+            return json.loads(_get(server.url + "state.json")[1])
+
+        wait_until(lambda: state()["frame"] == frame, f"the page to show frame {frame}")
+        seen.append(state())
+
+    try:
+        # Look at the page while the camera is delivering: before a part, and with one in view.
+        camera = ScriptedCamera(rendered, {5: lambda: look(4), 40: lambda: look(39)})
+        Runner(camera, pipeline, [view], health).run()
+        status, data = _get(server.url + "frame.jpg")
+    finally:
+        server.close()
+    assert [s["frame"] for s in seen] == [4, 39]
+    assert seen[0]["parts"] == [] and len(seen[1]["parts"]) == 1
+    assert status == 200 and cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR) is not None

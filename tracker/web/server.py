@@ -7,7 +7,6 @@ shows, it never controls. It binds 127.0.0.1 unless given another address.
 
 from __future__ import annotations
 
-import json
 import logging
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -62,7 +61,7 @@ class _Handler(BaseHTTPRequestHandler):
             else:
                 self._send(200, "image/jpeg", data)
         elif path == "/state.json":
-            self._send(200, "application/json", json.dumps(self.view.state()).encode())
+            self._send(200, "application/json", self.view.state_json())
         else:
             self._send(404, "text/plain", b"not found")
 

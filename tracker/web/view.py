@@ -7,6 +7,7 @@ viewers: they share the newest encoding (latest wins).
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 
@@ -46,6 +47,7 @@ class LiveView:
         self._started = time.monotonic()
         self._jpeg: tuple[int, float, bytes] | None = None  # (frame index, monotonic time, bytes)
         self._encode_lock = threading.Lock()
+        self._state: tuple[float, bytes] | None = None  # (monotonic time, JSON)
         self._grid = self._grid_lines()
         # The PLC queue's own pick order (first in line to leave the view first), for the page.
         self._order = PickOrder(PlcOptions.__dataclass_fields__["min_belt_speed_mm_s"].default)
@@ -103,6 +105,14 @@ class LiveView:
             cv2.putText(image, f"#{obj.id} ({rank})", (cx + 6, cy - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.5, colour, 1,
                         cv2.LINE_AA)
         return image
+
+    def state_json(self) -> bytes:
+        """``state()`` as JSON, built at most MAX_FPS times a second whatever the number of viewers."""
+        with self._encode_lock:
+            now = time.monotonic()
+            if self._state is None or now - self._state[0] >= 1.0 / MAX_FPS:
+                self._state = (now, json.dumps(self.state()).encode())
+            return self._state[1]
 
     def state(self) -> dict:
         """Everything the page's tables show, as plain JSON types."""
