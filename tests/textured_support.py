@@ -62,6 +62,8 @@ def _texture(height: int, width: int, seed: int = 3) -> np.ndarray:
 def textured_run(contrast: float, compress: bool = True) -> tuple[list[np.ndarray], list[dict], list[int]]:
     """(frames, truths, capture times in ns) of the textured scene."""
     sc = scene(contrast)
+    # The belt is shaded (darker towards the corners), the part is not: its contrast is exactly
+    # ``contrast`` at the image centre (|part - belt| >= 30 must hold where it is measured).
     renderer, frames = rendered(sc)
     belt = renderer._background
     part_level = BELT_LEVEL + contrast
@@ -73,7 +75,7 @@ def textured_run(contrast: float, compress: bool = True) -> tuple[list[np.ndarra
     out, truths = [], []
     for i, r in enumerate(order):
         image = frames[r][0].astype(np.float32)
-        cover = np.clip((image - belt) / (part_level * belt / BELT_LEVEL - belt), 0.0, 1.0)
+        cover = np.clip((image - belt) / (part_level - belt), 0.0, 1.0)
         start = travel - PX_PER_FRAME * r  # the window slides back: the belt's content moves +x
         textured = image + (1.0 - cover) * texture[:, start : start + w]
         gain = 1.0 + 0.12 * np.sin(2 * np.pi * i / len(order))  # lighting drift
