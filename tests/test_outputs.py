@@ -173,7 +173,7 @@ def test_full_disk_on_the_pose_file_is_fault_6_and_the_plc_hears_of_it(rendered,
         sink = PoseSink(str(poses), health)
         with pytest.raises(pose_sink.PoseOutputError, match="No space left on device"):
             run_loop(ScriptedCamera(rendered), [sink, writer], health)
-        final = decode_block(sim.history[-1].values, WordOrder.ABCD)
+        final = decode_block(sim.writes(0)[-1].values, WordOrder.ABCD)
     # Tracking and the PLC went on to the last frame; the PLC's final block says why poses stopped.
     assert writer.stats.submitted == len(rendered.frames)
     assert final["fault"] == FAULT_POSES and final["status"] & 1 == 0 and final["status"] & (1 << 15)

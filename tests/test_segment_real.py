@@ -168,3 +168,14 @@ def test_scene_fault_when_the_camera_sees_something_else(caplog):
     assert summary.scene_faults >= 1 and "frames with the scene not understood" in summary.line()
     assert sum("scene not understood" in r.message for r in caplog.records) == 1
     assert not summary.track_ids
+
+
+def test_recording_overlay_draws_the_region_of_interest():
+    from tracker.recording import schemas
+
+    calib = CameraSpec().calibration()
+    polygon = roi_polygon_px(SegmentConfig(roi_px=((10, 20), (600, 20), (600, 400))), calib)
+    drawn = schemas.Overlay(calib, 0.0, polygon).annotations(FrameResult(0, 0, ()))["points"]
+    assert [(p["x"], p["y"]) for p in drawn[0]["points"]] == [(10, 20), (600, 20), (600, 400)]
+    assert drawn[0]["outline_color"] == schemas.COLOR_ROI
+    assert schemas.Overlay(calib).annotations(FrameResult(0, 0, ()))["points"] == []

@@ -1,115 +1,45 @@
-"""Real-belt conditions on rendered scenes with exact truth: a knurled belt whose texture moves with
-the parts, the same after lossy video compression, and a belt region of interest with clutter
-outside it. Parts differ from the belt's mean level by 45 grey levels; the knurl swings +-25 around
-it. Measured with the textured belt model: centroid mean 0.10 mm on the moving knurl, 0.15 mm after
-MPEG-4 compression (the goal is 0.1 mm for both); angle ~0.05 / 0.11 deg; one track per part."""
+"""Exact truth on textured moving belts: texture moving with the belt, stops, repeated frames,
+lighting drift, sensor noise and an MPEG-4 round trip (tests/textured_support.py)."""
 
 from __future__ import annotations
 
-import dataclasses
-
-import cv2
-import numpy as np
 import pytest
-from conftest import rendered
+from textured_support import textured_run
 
 from tracker.config import SegmentConfig, TrackerConfig
 from tracker.evaluate import evaluate
 from tracker.pipeline import Pipeline
-from tracker.synthetic import CameraSpec, PartSpec, SceneSpec
+from tracker.synthetic import CameraSpec
 
-SPEED = 240.0  # mm/s, the belt's and so the parts'
-
-
-def _scene(contrast: float = 45.0, texture: float = 25.0, **kw) -> SceneSpec:
-    # 1.25 mm per pixel at the centre: a 6 mm knurl is ~5 px, like the real black belt's diamonds.
-    cam = CameraSpec(width=320, height=240, focal_px=560.0, tilt_deg=10.0)
-    parts = (PartSpec(80, 50, 0, -260, -20, 25, SPEED, 0, intensity=60 + contrast),
-             PartSpec(70, 45, 0, -420, 50, -40, SPEED, 0, intensity=60 - contrast))
-    settings = dict(n_frames=70, fps=30.0, supersample=4, blur_samples=3, belt_texture=texture,
-                    belt_texture_period_mm=6.0, belt_velocity_mm_s=(SPEED, 0.0)) | kw
-    return SceneSpec(cam, parts, **settings)
+SKIP_FIRST = 2
 
 
-TEXTURED = TrackerConfig(segment=SegmentConfig(model="textured"))
+def _run(contrast: float):
+    frames, truths, t_ns = textured_run(contrast)
+    pipeline = Pipeline(CameraSpec().calibration(), TrackerConfig(segment=SegmentConfig(model="textured")))
+    poses = [pipeline.process(i, f, t).to_dict() for i, (f, t) in enumerate(zip(frames, t_ns, strict=True))]
+    return poses, truths
 
 
-def _run(scene: SceneSpec, frames: list[np.ndarray], config: TrackerConfig = TEXTURED):
-    renderer, rendered_frames = rendered(scene)
-    pipeline = Pipeline(renderer.calibration, config)
-    poses = [pipeline.process(i, image, scene.t_ns(i)).to_dict() for i, image in enumerate(frames)]
-    return poses, [truth for _, truth in rendered_frames], pipeline
-
-
-def _compressed(frames: list[np.ndarray], tmp_path, fps: float) -> list[np.ndarray]:
-    """The frames through a real lossy codec (MPEG-4 part 2, as the mixed-items video) and back."""
-    path = str(tmp_path / "belt.avi")
-    h, w = frames[0].shape
-    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h), isColor=False)
-    assert writer.isOpened(), "OpenCV cannot encode MPEG-4 here"
-    for f in frames:
-        writer.write(f)
-    writer.release()
-    cap = cv2.VideoCapture(path)
-    out = []
-    while True:
-        ok, image = cap.read()
-        if not ok:
-            break
-        out.append(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY))
-    assert len(out) == len(frames)
-    return out
-
-
-def _check(poses, truths, centroid_mean_mm=0.12):
-    acc = evaluate(poses, truths, skip_first=3)
+@pytest.mark.parametrize("contrast", [30.0, -30.0, 140.0], ids=["lighter_by_30", "darker_by_30", "white"])
+def test_part_on_a_textured_moving_belt_with_stops_drift_and_compression(contrast):
+    poses, truths = _run(contrast)
+    acc = evaluate(poses, truths, skip_first=SKIP_FIRST)
     s = acc.summary()
-    assert acc.visible_frames > 50 and acc.missed_frames <= 3, s
+    assert acc.visible_frames > 150
     assert acc.false_objects == 0, s
-    assert s["centroid_mean_mm"] <= centroid_mean_mm, s
-    assert s["angle_mean_deg"] <= 0.5, s
-    ids = {o["id"] for p in poses for o in p["objects"]}
-    assert len(ids) == 2, f"one track per part, got ids {sorted(ids)}"
+    assert s["centroid_mean_mm"] <= 0.1, s
+    # One part, one track, through the 40-frame stop and the repeated frames.
+    assert len({o["id"] for p in poses for o in p["objects"]}) == 1
+    # Measured in most frames: the darker part is not where the shaded corners and the drift's dark
+    # phase take its contrast under the 30 levels (to ~23) and under segment.min_part_contrast (~19 %).
+    assert acc.missed_frames <= 0.25 * acc.visible_frames, s
 
 
-def test_a_knurled_belt_moving_with_the_parts():
-    scene = _scene()
-    _, frames = rendered(scene)
-    poses, truths, _ = _run(scene, [f for f, _ in frames])
-    _check(poses, truths)
-    # The belt's measured speed is the parts' speed (once the belt has moved for a frame).
-    speeds = [np.hypot(p["belt"]["vx_mm_s"], p["belt"]["vy_mm_s"]) for p in poses[2:]]
-    assert np.median(speeds) == pytest.approx(SPEED, rel=0.05)
-
-
-def test_the_plain_belt_model_sees_the_moving_knurl_as_phantoms():
-    scene = _scene()
-    _, frames = rendered(scene)
-    config = TrackerConfig()
-    poses, truths, _ = _run(scene, [f for f, _ in frames], config)
-    assert evaluate(poses, truths).false_objects > 0
-
-
-def test_the_same_belt_after_video_compression(tmp_path):
-    scene = _scene()
-    _, frames = rendered(scene)
-    poses, truths, _ = _run(scene, _compressed([f for f, _ in frames], tmp_path, scene.fps))
-    _check(poses, truths, centroid_mean_mm=0.2)
-
-
-def test_nothing_outside_the_region_of_interest_is_a_part():
-    # A bright bar moves across the floor beside the belt (rows 12-31): outside the belt's region.
-    scene = _scene()
-    _, frames = rendered(scene)
-    cluttered = []
-    for i, (f, _) in enumerate(frames):
-        f = f.copy()
-        x = 10 + 4 * i
-        f[12:32, x : x + 40] = 230
-        cluttered.append(f)
-    roi = [[0, 45], [319, 45], [319, 239], [0, 239]]
-    config = TrackerConfig(segment=dataclasses.replace(TEXTURED.segment, roi_px=roi))
-    poses, truths, _ = _run(scene, cluttered, config)
-    _check(poses, truths)
-    poses_all, _, _ = _run(scene, cluttered)
-    assert evaluate(poses_all, truths).false_objects > 0, "without the region the bar is a part"
+def test_the_reference_model_fails_on_the_same_belt():
+    """Without the textured model the moving texture is foreground: phantoms (the test above can fail)."""
+    frames, truths, t_ns = textured_run(30.0)
+    pipeline = Pipeline(CameraSpec().calibration())
+    poses = [pipeline.process(i, f, t).to_dict() for i, (f, t) in enumerate(zip(frames, t_ns, strict=True))]
+    acc = evaluate(poses, truths, skip_first=SKIP_FIRST)
+    assert acc.false_objects > 0 or acc.summary()["centroid_mean_mm"] > 0.1

@@ -57,9 +57,6 @@ class SegmentConfig:
     # Textured model: learning rate of the belt's per-pixel mean and variance per pixel of belt
     # travel (a stopped belt or a duplicate frame brings no new belt, so it teaches nothing).
     textured_rate: float = 0.04
-    # Textured model: edges are located on frame and reference blurred by this box (px, odd): a box
-    # blur keeps a straight edge's coverage integral, and the belt's texture averages out.
-    textured_edge_blur_px: int = 5
     # Textured model: the narrowest part's width on the belt (mm); foreground thinner than this is a
     # streak, seam or mark across the belt. 0: only what the working image cannot resolve (~2 % of
     # the frame's long side) is thin.
@@ -68,9 +65,7 @@ class SegmentConfig:
     def __post_init__(self) -> None:
         _positive(self, "diff_threshold", "motion_threshold", "background_every",
                   "absorb_after_frames", "open_kernel_px", "max_blobs", "textured_work_px",
-                  "textured_threshold", "textured_sigmas", "min_part_contrast", "textured_edge_blur_px")
-        if self.textured_edge_blur_px % 2 == 0:
-            raise BadInput(f"segment.textured_edge_blur_px: expected an odd number, got {self.textured_edge_blur_px}")
+                  "textured_threshold", "textured_sigmas", "min_part_contrast")
         if self.model not in SEGMENT_MODELS:
             raise BadInput(f"segment.model: expected one of {list(SEGMENT_MODELS)}, got {self.model!r}")
         if self.roi_px and self.roi_mm:
@@ -122,6 +117,15 @@ class MeasureConfig:
         _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "box_max_rms_px")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
+        try:
+            # JSON gives a list; keep the frozen settings hashable and equal however given.
+            starts = tuple(float(h) for h in self.height_starts_mm)
+        except (TypeError, ValueError):
+            raise BadInput(f"measure.height_starts_mm: expected a list of heights in mm, "
+                           f"got {self.height_starts_mm!r}") from None
+        if not starts or not all(0 <= h < 5000 for h in starts):
+            raise BadInput(f"measure.height_starts_mm: expected heights from 0 to 5000 mm, got {starts!r}")
+        object.__setattr__(self, "height_starts_mm", starts)
 
 
 @dataclass(frozen=True)

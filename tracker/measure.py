@@ -23,8 +23,7 @@ from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
 from tracker.undistort import BeltMapper
 
-# Pixels on each side of a crossing that the coverage sum spans (covers blur up to ~4 px); the
-# segmenter's texture blur may move a mask's edge by up to half its size, which widens it.
+# Pixels on each side of a crossing that the coverage sum spans (covers blur up to ~4 px).
 HALF_WINDOW_PX = 3
 # A row crossing is used where |d/dx| >= this * |d/dy| (edge within ~63 deg of vertical).
 _STEEP_RATIO = 0.5
@@ -52,11 +51,6 @@ class Measurer:
     def __init__(self, mapper: BeltMapper, config: MeasureConfig) -> None:
         self.mapper = mapper
         self.config = config
-        # Half the width of the window each sub-pixel edge is summed over (see HALF_WINDOW_PX).
-        self.half_window_px = HALF_WINDOW_PX
-        # Blur (px) of frame and reference before edges are located (1: none): on a textured belt,
-        # set from the segment settings, so the texture's pixel-to-pixel swing averages out.
-        self.blur_px = 1
         self._width, self._height = mapper.calibration.size
         # Conservative pixel-area pre-filter, so tiny specks are never mapped at all.
         self._min_area_px = 0.5 * config.min_area_mm2 / mapper.max_mm_per_px() ** 2
@@ -82,7 +76,7 @@ class Measurer:
     def _measure(self, frame, reference, contour) -> Measurement | None:
         cfg = self.config
         x, y, w, h = cv2.boundingRect(contour)
-        b = cfg.border_margin_px + self.blur_px // 2  # a blurred mask stops short of the border
+        b = cfg.border_margin_px
         clipped = x < b or y < b or x + w > self._width - b or y + h > self._height - b
         # The hull in pixels maps to the hull on the belt closely enough for the area test
         # (and costs a tenth of mapping the whole outline).
@@ -124,36 +118,27 @@ class Measurer:
     def _edge_points(self, frame, reference, contour, bbox) -> np.ndarray | None:
         cfg = self.config
         x, y, w, h = bbox
-        k = self.half_window_px
-        blur = self.blur_px
-        # Room for every window, and for the blur to see real pixels at the crop's edge.
-        m = cfg.roi_margin_px + (k - HALF_WINDOW_PX) + blur // 2
+        m = cfg.roi_margin_px
         x0, y0 = max(0, x - m), max(0, y - m)
         x1, y1 = min(self._width, x + w + m), min(self._height, y + h + m)
         img8 = frame[y0:y1, x0:x1]
         ref = reference[y0:y1, x0:x1].astype(np.float32)
-        if blur > 1:
-            # A textured belt: edges are located on the blurred frame against the blurred
-            # reference. A box blur keeps a straight edge's coverage integral, so the sums below
-            # still give its position, now without the texture's pixel-to-pixel swing.
-            img8 = cv2.blur(img8.astype(np.float32), (blur, blur))
-            ref = cv2.blur(ref, (blur, blur))
         blob = np.zeros(img8.shape, dtype=np.uint8)
         cv2.drawContours(blob, [contour], -1, 255, thickness=cv2.FILLED, offset=(-x0, -y0))
-        zone = cv2.dilate(blob, _ZONE if blur == 1 else _square(7 + blur))
+        zone = cv2.dilate(blob, _ZONE)
         belt = cv2.bitwise_not(zone)
-        inner = cv2.erode(blob, _ERODE if blur == 1 else _square(max(5, blur)))
+        inner = cv2.erode(blob, _ERODE)
         if cv2.countNonZero(belt) < 16 or cv2.countNonZero(inner) < 16:
             return None
         # Lighting gain of this frame against the reference, from the belt around the blob.
-        levels = img8 if blur == 1 else cv2.convertScaleAbs(img8)
-        gain = _median_u8(levels, belt) / max(_median_u8(cv2.convertScaleAbs(ref), belt), 1.0)
+        gain = _median_u8(img8, belt) / max(_median_u8(cv2.convertScaleAbs(ref), belt), 1.0)
         belt_level = gain * ref
         # Pixel = (1 - c) * belt + c * part: the part's own level is uniform, the belt's is
         # not (shading), so the contrast is taken per pixel against the local reference.
-        part_level = _median_u8(levels, inner)
+        part_level = _median_u8(img8, inner)
         inside = blob > 0
         local = cfg.part_height_mm > 0 or cfg.estimate_height
+        k = HALF_WINDOW_PX
         rows = _boundary_crossings(img8, belt_level, part_level, inside, cfg.min_contrast, k, local)
         cols = _boundary_crossings(img8.T, belt_level.T, part_level, inside.T, cfg.min_contrast, k, local)
         if rows is None or cols is None:
@@ -162,10 +147,6 @@ class Measurer:
         if len(points) == 0:
             return None
         return points + [x0, y0]
-
-
-def _square(size: int) -> np.ndarray:
-    return cv2.getStructuringElement(cv2.MORPH_RECT, (size, size))
 
 
 def _median_u8(image: np.ndarray, mask: np.ndarray) -> float:

@@ -16,16 +16,20 @@ import numpy as np
 from tracker.calibration import Calibration
 from tracker.config import TrackerConfig
 from tracker.errors import BadInput
-from tracker.measure import HALF_WINDOW_PX, Measurer
+from tracker.measure import Measurer
 from tracker.poses import FrameResult
 from tracker.segment import make_segmenter
 from tracker.segment.guard import ClutterGuard
 from tracker.segment.motion import BeltMotion
 from tracker.segment.roi import roi_mask, roi_polygon_px
+from tracker.segment.textured import SmoothedView
 from tracker.track import Tracker
 from tracker.undistort import BeltMapper
 
 STAGES = ("segment", "undistort", "measure", "track")
+# On a textured belt, edges are measured through this slight blur (px): it averages the belt's
+# texture over neighbouring rows too, and as it is symmetric the edges stay where they are.
+_TEXTURE_BLUR_PX = 1.0
 
 
 class Pipeline:
@@ -46,10 +50,6 @@ class Pipeline:
         self.segmenter = make_segmenter(seg, roi, calibration.mm_per_px_at_centre())
         self.mapper = mapper = BeltMapper(calibration, self.config.measure.part_height_mm)
         self.measurer = Measurer(mapper, self.config.measure)
-        if seg.model == "textured":
-            # Edges on blurred images: the window must hold the blurred ramp and the mask's offset.
-            self.measurer.blur_px = seg.textured_edge_blur_px
-            self.measurer.half_window_px = HALF_WINDOW_PX + seg.textured_edge_blur_px
         # The belt's own motion is measured where the belt model needs it (textured belts).
         self.motion = BeltMotion(roi) if seg.model == "textured" else None
         self._roi_centre_px = np.array(cv2.boundingRect(roi), dtype=np.float64)
@@ -80,7 +80,8 @@ class Pipeline:
         guarded = self.guard(mask)
         t1 = clock()
         undistort_before = self.mapper.spent_ns
-        measurements = self.measurer(frame, self.segmenter.reference, guarded.mask)
+        seen = frame if self.motion is None else SmoothedView(frame, _TEXTURE_BLUR_PX)
+        measurements = self.measurer(seen, self.segmenter.reference, guarded.mask)
         if guarded.at_edge:
             # A blob reaching the edge of the region of interest may go on outside it: clipped.
             measurements = [dataclasses.replace(m, clipped=True) if m.bbox_px in guarded.at_edge else m

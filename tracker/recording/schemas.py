@@ -50,6 +50,7 @@ COLOR_MEASURED = {"r": 0.1, "g": 0.9, "b": 0.2, "a": 1.0}
 COLOR_PREDICTED = {"r": 1.0, "g": 0.6, "b": 0.0, "a": 1.0}
 COLOR_TEXT_BG = {"r": 0.0, "g": 0.0, "b": 0.0, "a": 0.6}
 COLOR_NONE = {"r": 0.0, "g": 0.0, "b": 0.0, "a": 0.0}
+COLOR_ROI = {"r": 0.2, "g": 0.6, "b": 1.0, "a": 0.8}  # the region of interest
 LINE_PX = 2.0
 CENTROID_DIAMETER_PX = 6.0
 FONT_PX = 14.0
@@ -282,6 +283,8 @@ class Overlay:
 
     calibration: Calibration
     part_height_mm: float = 0.0
+    # The region of interest as an image polygon (pixels), drawn on every frame; None: not set.
+    roi_px: np.ndarray | None = None
 
     def project(self, points_mm: np.ndarray) -> np.ndarray:
         c = self.calibration
@@ -294,6 +297,11 @@ class Overlay:
     def annotations(self, result: FrameResult) -> dict:
         stamp = _stamp(result.t_ns)
         circles, points, texts = [], [], []
+        if self.roi_px is not None:
+            points.append({"timestamp": stamp, "type": POINTS_LINE_LOOP,
+                           "points": [{"x": float(x), "y": float(y)} for x, y in self.roi_px],
+                           "outline_color": COLOR_ROI, "outline_colors": [], "fill_color": COLOR_NONE,
+                           "thickness": LINE_PX, "metadata": []})
         for obj in result.objects:
             color = COLOR_MEASURED if obj.measured else COLOR_PREDICTED
             px = self.project(np.vstack([obj.corners_mm, [[obj.x_mm, obj.y_mm]]]))

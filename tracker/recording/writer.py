@@ -33,6 +33,7 @@ from tracker.health import FAULT_RECORDING, Health
 from tracker.poses import FrameResult
 from tracker.recording import schemas
 from tracker.recording.mcapio import COMPRESSIONS, Compression, McapWriter, OpenChunk, Output, RawFile
+from tracker.segment.roi import roi_polygon_px
 from tracker.sources import Frame
 
 log = logging.getLogger(__name__)
@@ -133,7 +134,8 @@ class Recorder:
         self.health = health or Health()
         self._out = out
         self._overruns = overruns
-        self._overlay = schemas.Overlay(info.calibration, info.config.measure.part_height_mm)
+        self._overlay = schemas.Overlay(info.calibration, info.config.measure.part_height_mm,
+                                        roi_polygon_px(info.config.segment, info.calibration))
         self._frames_in: queue.Queue[Any] = queue.Queue(self.config.queue_frames)
         self._chunks_out: queue.Queue[Any] = queue.Queue(self.config.disk_queue_chunks)
         self._spares: queue.SimpleQueue[bytearray] = queue.SimpleQueue()  # written chunks' buffers
