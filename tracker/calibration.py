@@ -61,6 +61,8 @@ class Calibration:
     belt_tvec: np.ndarray | None = None
     belt_homography: np.ndarray | None = None
     source: str = field(default="<memory>", compare=False)
+    # Non-empty for a calibration made without a board (from a scale alone): what it assumes.
+    approximate: str = ""
 
     def __post_init__(self) -> None:
         where = self.source
@@ -256,9 +258,13 @@ def load(path: str | os.PathLike, require_belt: bool = True) -> Calibration:
                 raise CalibrationError(f"{where}: rms_reprojection_error_px: expected a number")
             rms = float(rms_node.real())
         rvec, tvec, hom = (matrix(n, optional=True) for n in ("belt_rvec", "belt_tvec", "belt_homography"))
+        note = ""
+        if node("approximate", optional=True) is not None:
+            note_node = node("approximate_note", optional=True)
+            note = (note_node.string() if note_node is not None and note_node.isString() else "") or "approximate"
     finally:
         fs.release()
-    calib = Calibration(width, height, k, d, rms, rvec, tvec, hom, source=where)
+    calib = Calibration(width, height, k, d, rms, rvec, tvec, hom, source=where, approximate=note)
     if require_belt:
         calib.require_belt()
     return calib
@@ -282,6 +288,10 @@ def save(calib: Calibration, path: str | os.PathLike) -> None:
             fs.write("dist_coeffs", calib.dist_coeffs.reshape(1, -1))
             if calib.rms_reprojection_error_px is not None:
                 fs.write("rms_reprojection_error_px", float(calib.rms_reprojection_error_px))
+            if calib.approximate:
+                # Extra nodes: any OpenCV reader ignores them; ours says the file is approximate.
+                fs.write("approximate", 1)
+                fs.write("approximate_note", calib.approximate)
             if calib.has_belt:
                 fs.write("belt_rvec", calib.belt_rvec.reshape(3, 1))
                 fs.write("belt_tvec", calib.belt_tvec.reshape(3, 1))

@@ -21,11 +21,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tracker.calibration import Calibration
+from tracker.calibrate.approximate import nadir_calibration
 from tracker.config import MeasureConfig, SegmentConfig, TrackConfig, TrackerConfig
 from tracker.pipeline import Pipeline
 from tracker.poses import FrameResult
-from tracker.synthetic import CameraSpec
 
 PHANTOM_MEASUREMENTS = 10
 # Tracked on the belt (its motion measured), a part riding it hardly accelerates: a tenth of the
@@ -83,13 +82,6 @@ VIDEOS = (
               ((0, 330), (200, 290), (500, 275), (719, 285), (719, 470), (500, 470), (200, 480), (0, 500)),
               labelled=False),
 )
-
-
-def nadir_calibration(width: int, height: int, mm_per_px: float) -> Calibration:
-    """An approximate calibration of a camera looking straight down with this scale at the belt."""
-    height_mm = 1000.0
-    return CameraSpec(width=width, height=height, focal_px=height_mm / mm_per_px, principal_offset_px=(0.0, 0.0),
-                      height_mm=height_mm).calibration()
 
 
 def decode(path: Path) -> tuple[list[np.ndarray], float]:

@@ -44,6 +44,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--preview", metavar="FILE.png", help="IMAGE with the world origin and X/Y axes drawn")
     b.set_defaults(func=run_belt)
 
+    a = csub.add_parser("scale", help="an APPROXIMATE straight-down calibration from a scale (no board)",
+                        description="For trying a video before a board is at hand: a camera looking straight "
+                        "down, no distortion, with the belt's scale from --mm-per-px or from a part's known "
+                        "length (--length-px and --length-mm). The file is marked approximate.")
+    a.add_argument("--size", required=True, metavar="WxH", help="image size in pixels, e.g. 1280x720")
+    a.add_argument("--mm-per-px", type=float, metavar="S", help="belt millimetres per image pixel")
+    a.add_argument("--length-px", type=float, metavar="P", help="a part's length measured in the image (px)")
+    a.add_argument("--length-mm", type=float, metavar="M", help="the same part's real length (mm)")
+    a.add_argument("--out", required=True, metavar="CALIB", help="calibration file to write (.yaml/.yml/.xml)")
+    a.set_defaults(func=run_scale)
+
     s = csub.add_parser("show", help="summary of a calibration file")
     s.add_argument("calibration", metavar="CALIB")
     s.set_defaults(func=run_show)
@@ -142,6 +153,30 @@ def run_belt(args: argparse.Namespace) -> int:
         if not ok:
             raise BadInput(f"{preview}: cannot write the preview (expected a .png file)")
         print(f"wrote {preview}")
+    return 0
+
+
+def run_scale(args: argparse.Namespace) -> int:
+    from tracker.calibrate.approximate import nadir_calibration  # noqa: PLC0415 - only this command
+
+    try:
+        width, height = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        raise BadInput(f"--size: expected WIDTHxHEIGHT in pixels, e.g. 1280x720, got {args.size!r}") from None
+    by_length = args.length_px is not None or args.length_mm is not None
+    if (args.mm_per_px is None) == (not by_length) or (by_length and None in (args.length_px, args.length_mm)):
+        raise BadInput("scale: give --mm-per-px S, or both --length-px P and --length-mm M")
+    if by_length:
+        if not (args.length_px > 0 and args.length_mm > 0):
+            raise BadInput(f"--length-px/--length-mm: expected positive lengths, got {args.length_px} px, "
+                           f"{args.length_mm} mm")
+        mm_per_px = args.length_mm / args.length_px
+    else:
+        mm_per_px = args.mm_per_px
+    out = _check_out(args.out)
+    calib = nadir_calibration(width, height, mm_per_px)
+    calibfile.save(calib, out)
+    print(f"tracker: wrote {out}: APPROXIMATE, {mm_per_px:.4g} mm/px, straight down, no distortion")
     return 0
 
 

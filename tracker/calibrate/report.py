@@ -110,6 +110,8 @@ def show_text(c: Calibration) -> list[str]:
         "distortion: " + " ".join(f"{v:.6g}" for v in c.dist_coeffs.reshape(-1)),
         "intrinsic RMS: " + ("-" if c.rms_reprojection_error_px is None else f"{c.rms_reprojection_error_px:.4f} px"),
     ]
+    if c.approximate:
+        lines.insert(1, f"APPROXIMATE: {c.approximate}")
     if c.has_belt:
         lines += [
             f"camera height above the belt: {c.camera_height_mm():.1f} mm",
