@@ -55,8 +55,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--out", required=True, metavar="CALIB", help="calibration file to write (.yaml/.yml/.xml)")
     a.set_defaults(func=run_scale)
 
-    s = csub.add_parser("show", help="summary of a calibration file")
+    s = csub.add_parser("show", help="summary of a calibration file (or --format ros: ROS camera_info YAML)")
     s.add_argument("calibration", metavar="CALIB")
+    s.add_argument("--format", choices=("text", "ros"), default="text",
+                   help="text: a summary (default); ros: the intrinsics as a ROS camera_info YAML on stdout")
     s.set_defaults(func=run_show)
 
 
@@ -182,6 +184,11 @@ def run_scale(args: argparse.Namespace) -> int:
 
 def run_show(args: argparse.Namespace) -> int:
     calib = calibfile.load(args.calibration, require_belt=False)
+    if args.format == "ros":
+        from tracker.calibrate.ros import camera_info_yaml  # noqa: PLC0415 - only this format
+
+        print(camera_info_yaml(calib), end="")
+        return 0
     for line in report.show_text(calib):
         print(line)
     return 0
