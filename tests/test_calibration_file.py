@@ -125,3 +125,19 @@ def test_cli_exit_code_2_and_one_line(tmp_path, calib, capsys):
     assert code == 2
     lines = [line for line in err.splitlines() if line.strip()]
     assert len(lines) == 1 and "Traceback" not in err
+
+
+def test_a_belt_behind_the_camera_or_a_mirrored_board_frame_is_refused():
+    from tracker.calibration import Calibration, homography_from_pose
+
+    good = CameraSpec(tilt_deg=10).calibration()
+    k, d = good.camera_matrix, good.dist_coeffs
+    rot, _ = cv2.Rodrigues(good.belt_rvec)
+    cases = {
+        "behind the camera": (good.belt_rvec, -good.belt_tvec),
+        # The same plane with the board frame turned over (Y and Z flipped): the camera on Z > 0.
+        "far side of the belt": (cv2.Rodrigues(rot @ np.diag([1.0, -1.0, -1.0]))[0], good.belt_tvec),
+    }
+    for needle, (rvec, tvec) in cases.items():
+        with pytest.raises(CalibrationError, match=needle):
+            Calibration(640, 480, k, d, None, rvec, tvec, homography_from_pose(k, rvec, tvec), source="x.yaml")

@@ -102,6 +102,24 @@ class Calibration:
                 raise CalibrationError(f"{where}: {name}: missing (the belt pose needs all three nodes)")
             _check_matrix(where, name, value, shape)
         self._check_homography()
+        self._check_camera_side()
+
+    def _check_camera_side(self) -> None:
+        """The belt must lie in front of the camera, and the camera on the belt's side that World Z
+        points away from (Z points into the belt: a part's top is at Z = -h)."""
+        rot, _ = cv2.Rodrigues(np.asarray(self.belt_rvec, dtype=np.float64).reshape(3, 1))
+        t = np.asarray(self.belt_tvec, dtype=np.float64).reshape(3)
+        centre_world = -rot.T @ t
+        k = self.camera_matrix
+        seen = apply_homography(homography_from_pose(k, self.belt_rvec, self.belt_tvec), [[k[0, 2], k[1, 2]]])[0]
+        depth = float((rot @ np.array([seen[0], seen[1], 0.0]) + t)[2])
+        if not depth > 0:
+            raise CalibrationError(f"{self.source}: belt_rvec/belt_tvec: the belt lies behind the camera "
+                                   f"(depth {depth:.1f} mm at the image centre); expected it in front")
+        if not centre_world[2] < 0:
+            raise CalibrationError(f"{self.source}: belt_rvec/belt_tvec: the camera is on the far side of the "
+                                   f"belt (world Z {centre_world[2]:.1f} mm; Z points into the belt, so the camera "
+                                   "must be at Z < 0): the board's frame is mirrored")
 
     def _check_homography(self) -> None:
         expected = homography_from_pose(self.camera_matrix, self.belt_rvec, self.belt_tvec)
