@@ -62,3 +62,15 @@ def test_wide_angle_views_match_opencv_used_directly(shared_data, tmp_path):
     assert data["all_views"]["rms_px"] <= 0.2345 and data["all_views"]["n_views"] == 50
     assert data["without_outliers"]["n_views"] >= 49
     assert data["without_outliers"]["rms_px"] <= 0.234
+
+
+def test_a_pattern_smaller_than_the_board_is_warned(shared_data, tmp_path, capsys):
+    """--pattern 8x6 on OpenCV's 9x6 board: corners are found, but the checker goes on past them."""
+    images = sorted(str(p) for p in (shared_data / "opencv_calib").glob("left*.jpg"))
+    for pattern, warned in (("8x6", True), ("9x6", False)):
+        rep = tmp_path / f"{pattern}.json"
+        assert main(["calibrate", "intrinsics", *images, "--pattern", pattern, "--square", "25",
+                     "--out", str(tmp_path / f"{pattern}.yaml"), "--report", str(rep)]) == 0
+        warnings = json.loads(rep.read_text())["warnings"]
+        assert any("more inner corners than --pattern" in w for w in warnings) == warned, warnings
+    assert "more inner corners" in capsys.readouterr().out

@@ -154,3 +154,38 @@ def _first_square_darkness(image: np.ndarray, grid: np.ndarray) -> float:
 
     first = mean_at(0.5, 0.5)
     return (mean_at(1.5, 0.5) + mean_at(0.5, 1.5)) / 2 - first
+
+
+def board_continues(image: np.ndarray, corners: np.ndarray, pattern: Pattern) -> list[str]:
+    """Sides (in board terms) past which the checker pattern goes on: a board with more inner
+    corners than ``--pattern`` says. A board's edge squares lie one square beyond its outermost
+    inner corners; one more square out is its margin, uniform. Where the squares there still
+    alternate as strongly as inside, the detector found part of a larger board."""
+    rows, cols = pattern.rows, pattern.cols
+    grid = corners.reshape(rows, cols, 2).astype(np.float64)
+    board = np.stack(np.meshgrid(np.arange(cols), np.arange(rows)), axis=-1).astype(np.float64)
+    h, w = image.shape[:2]
+
+    def levels(near: tuple[slice, slice], points: list[tuple[float, float]]) -> np.ndarray | None:
+        # Extrapolate from the three lines of corners nearest the side: lens distortion bends the
+        # board, and a homography over the whole grid would place the probes half a square off.
+        to_image, _ = cv2.findHomography(board[near].reshape(-1, 2), grid[near].reshape(-1, 2))
+        if to_image is None:
+            return None
+        pts = cv2.perspectiveTransform(np.array(points, dtype=np.float64).reshape(-1, 1, 2), to_image).reshape(-1, 2)
+        if np.any(pts < 0) or np.any(pts[:, 0] > w - 1) or np.any(pts[:, 1] > h - 1):
+            return None  # outside the image: nothing to tell
+        return image[np.rint(pts[:, 1]).astype(int), np.rint(pts[:, 0]).astype(int)].astype(np.float64)
+
+    def swing(values: np.ndarray | None) -> float:
+        return 0.0 if values is None or len(values) < 2 else float(np.mean(np.abs(np.diff(values))))
+
+    everything = (slice(None), slice(None))
+    inside = swing(levels(everything, [(c + 0.5, 0.5) for c in range(cols - 1)]))
+    sides = {
+        "first row": ((slice(0, 3), slice(None)), [(c + 0.5, -1.5) for c in range(cols - 1)]),
+        "last row": ((slice(-3, None), slice(None)), [(c + 0.5, rows - 1 + 1.5) for c in range(cols - 1)]),
+        "first column": ((slice(None), slice(0, 3)), [(-1.5, r + 0.5) for r in range(rows - 1)]),
+        "last column": ((slice(None), slice(-3, None)), [(cols - 1 + 1.5, r + 0.5) for r in range(rows - 1)]),
+    }
+    return [name for name, (near, pts) in sides.items() if inside > 0 and swing(levels(near, pts)) > 0.5 * inside]

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from tracker.calibrate.board import Pattern, detect
+from tracker.calibrate.board import Pattern, board_continues, detect
 from tracker.calibrate.settings import DEFAULTS, CalibrateSettings
 from tracker.errors import BadInput
 
@@ -94,9 +94,12 @@ def calibrate_intrinsics(
     h, w = images[0].shape[:2]
     size = (w, h)
     views = []
+    larger = 0  # views where the board goes on past the pattern
     for path, image in zip(paths, images, strict=True):
         found = detect(image, pattern, detector, settings)
         views.append(View(path, found.corners if found else None, found.method if found else None))
+        if found is not None and board_continues(image, found.corners, pattern):
+            larger += 1
     usable = [i for i, v in enumerate(views) if v.corners is not None]
     if not usable:
         raise BadInput(
@@ -124,6 +127,12 @@ def calibrate_intrinsics(
             warnings.append(
                 f"{len(bad)} outlier view(s) kept: without them fewer than {min_views} views (--min-views) remain"
             )
+    # A probe can land on clutter beside a board: only a share of views counts as evidence.
+    if larger >= settings.larger_board_share * len(usable):
+        warnings.append(
+            f"in {larger} view(s) the checker pattern goes on past the {pattern} corners found: the board may "
+            "have more inner corners than --pattern says (COLSxROWS counts inner corners)"
+        )
     final = without or all_views
     counts, missed = coverage(views, final.view_indices, size, settings)
     if missed:

@@ -23,6 +23,9 @@ class CalibrateSettings:
     min_max_tilt_deg: float = 20.0
     # The board used for the belt should cover at least this fraction of the image (else extrapolation).
     min_belt_board_area: float = 0.10
+    # --pattern too small for the board: warned when the pattern goes on past the corners found in at
+    # least this share of the views (a single view can be fooled by clutter beside the board).
+    larger_board_share: float = 0.25
     # --points: RANSAC inlier threshold (px) and the residual (mm, RMS over inliers) that is refused.
     ransac_px: float = 3.0
     max_points_residual_mm: float = 2.0
