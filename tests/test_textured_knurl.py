@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import dataclasses
 
-import cv2
 import numpy as np
 import pytest
 from conftest import rendered
+from textured_support import mpeg4_round_trip
 
 from tracker.config import SegmentConfig, TrackerConfig
 from tracker.evaluate import evaluate
@@ -39,26 +39,6 @@ def _run(scene: SceneSpec, frames: list[np.ndarray], config: TrackerConfig = TEX
     pipeline = Pipeline(renderer.calibration, config)
     poses = [pipeline.process(i, image, scene.t_ns(i)).to_dict() for i, image in enumerate(frames)]
     return poses, [truth for _, truth in rendered_frames], pipeline
-
-
-def _compressed(frames: list[np.ndarray], tmp_path, fps: float) -> list[np.ndarray]:
-    """The frames through a real lossy codec (MPEG-4 part 2, as the mixed-items video) and back."""
-    path = str(tmp_path / "belt.avi")
-    h, w = frames[0].shape
-    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h), isColor=False)
-    assert writer.isOpened(), "OpenCV cannot encode MPEG-4 here"
-    for f in frames:
-        writer.write(f)
-    writer.release()
-    cap = cv2.VideoCapture(path)
-    out = []
-    while True:
-        ok, image = cap.read()
-        if not ok:
-            break
-        out.append(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY))
-    assert len(out) == len(frames)
-    return out
 
 
 def _check(poses, truths, centroid_mean_mm=0.12):
@@ -90,10 +70,10 @@ def test_the_plain_belt_model_sees_the_moving_knurl_as_phantoms():
     assert evaluate(poses, truths).false_objects > 0
 
 
-def test_the_same_belt_after_video_compression(tmp_path):
+def test_the_same_belt_after_video_compression():
     scene = _scene()
     _, frames = rendered(scene)
-    poses, truths, _ = _run(scene, _compressed([f for f, _ in frames], tmp_path, scene.fps))
+    poses, truths, _ = _run(scene, mpeg4_round_trip([f for f, _ in frames], scene.fps))
     _check(poses, truths, centroid_mean_mm=0.2)
 
 

@@ -84,15 +84,16 @@ def textured_run(contrast: float, compress: bool = True) -> tuple[list[np.ndarra
         truth = dict(frames[r][1], frame=i)
         truths.append(truth)
     if compress:
-        out = _mpeg4_round_trip(out)
+        out = mpeg4_round_trip(out)
     return out, truths, [round(i * 1e9 / FPS) for i in range(len(out))]
 
 
-def _mpeg4_round_trip(frames: list[np.ndarray]) -> list[np.ndarray]:
+def mpeg4_round_trip(frames: list[np.ndarray], fps: float = FPS) -> list[np.ndarray]:
+    """The frames through a real lossy codec (MPEG-4 part 2, as the mixed-items video) and back."""
     h, w = frames[0].shape
     with tempfile.TemporaryDirectory() as tmp:
         path = str(Path(tmp) / "belt.avi")
-        writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"mp4v"), FPS, (w, h))
+        writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
         if not writer.isOpened():
             raise RuntimeError("this OpenCV cannot encode MPEG-4")
         for f in frames:
