@@ -55,6 +55,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--out", required=True, metavar="CALIB", help="calibration file to write (.yaml/.yml/.xml)")
     a.set_defaults(func=run_scale)
 
+    r = csub.add_parser("import-ros", help="intrinsics from a ROS camera_info YAML file (then: calibrate belt)",
+                        description="Reads a camera_info YAML (as ROS camera_calibration writes it, or "
+                        "'calibrate show --format ros'): image size, camera_matrix, distortion_model "
+                        "plumb_bob or rational_polynomial, distortion_coefficients. The file written has "
+                        "no belt pose yet and no RMS (K was not calibrated here).")
+    r.add_argument("camera_info", metavar="CAMERA_INFO.yaml")
+    r.add_argument("--out", required=True, metavar="CALIB", help="calibration file to write (.yaml/.yml/.xml)")
+    r.set_defaults(func=run_import_ros)
+
     s = csub.add_parser("show", help="summary of a calibration file (or --format ros: ROS camera_info YAML)")
     s.add_argument("calibration", metavar="CALIB")
     s.add_argument("--format", choices=("text", "ros"), default="text",
@@ -179,6 +188,19 @@ def run_scale(args: argparse.Namespace) -> int:
     calib = nadir_calibration(width, height, mm_per_px)
     calibfile.save(calib, out)
     print(f"tracker: wrote {out}: APPROXIMATE, {mm_per_px:.4g} mm/px, straight down, no distortion")
+    return 0
+
+
+def run_import_ros(args: argparse.Namespace) -> int:
+    from tracker.calibrate.ros import read_camera_info  # noqa: PLC0415 - only this command
+
+    out = _check_out(args.out)
+    calib = read_camera_info(args.camera_info)
+    calibfile.save(calib, out)
+    k = calib.camera_matrix
+    print(f"tracker: wrote {out}: intrinsics from {args.camera_info} ({calib.image_width}x{calib.image_height}, "
+          f"fx {k[0, 0]:.2f} fy {k[1, 1]:.2f} px, {calib.dist_coeffs.size} distortion coefficients); "
+          f"next: tracker calibrate belt IMAGE --calibration {out} ...")
     return 0
 
 
