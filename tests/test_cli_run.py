@@ -33,7 +33,9 @@ def test_run_writes_the_contract_pose_stream(scene_dir, tmp_path):
         assert pose["t"] == pytest.approx(index / 30.0, abs=1e-9)
         for obj in pose["objects"]:
             assert list(obj) == ["id", "x_mm", "y_mm", "angle_deg", "length_mm", "width_mm", "corners_mm",
-                                 "vx_mm_s", "vy_mm_s", "height_mm", "measured"]
+                                 "vx_mm_s", "vy_mm_s", "height_mm", "measured", "pickable", "height_converged"]
+            # One part alone, its height given (flat): nothing keeps it from the arm.
+            assert obj["pickable"] is True and obj["height_converged"] is True
             c = np.array(obj["corners_mm"])
             area = 0.5 * (np.dot(c[:, 0], np.roll(c[:, 1], -1)) - np.dot(c[:, 1], np.roll(c[:, 0], -1)))
             assert area > 0 and -90 < obj["angle_deg"] <= 90

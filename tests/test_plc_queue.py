@@ -297,3 +297,34 @@ def test_a_part_hidden_under_an_arm_stays_listed_with_its_age(tmp_path):
     assert set(seen["after"]) == set(seen["before"]), "the same two ids after the arm has passed"
     assert all(e["measured"] == 1 and e["age_frames"] == 0 for e in seen["after"].values())
     assert len({o["id"] for line in read_poses(poses) for o in line["objects"]}) == 2
+
+
+def test_touching_parts_reach_the_plc_as_two_entries_flagged_not_pickable(tmp_path):
+    """Two parts touching at a corner (tests/test_touching.py): mbpoll reads two entries, each at its own
+    part's true centre, each with flags bit 0 (not pickable) set."""
+    from test_touching import _scene, _touching_at_a_corner
+
+    from tracker.synthetic import Renderer
+
+    scene = _scene(_touching_at_a_corner())
+    truth = Renderer(scene).render(30)[1]
+    rendered = Rendered(scene)
+    wo = WordOrder.ABCD
+    writer, sim, port = open_writer("client", wo, Health())
+    source = ScriptedCamera(rendered)
+    seen: dict = {}
+
+    def read_at(k: int) -> None:
+        want = ms_u32(source.arrival_ns[k - 1])
+        wait_until(lambda: decode_queue(sim.read(QUEUE_START, QUEUE_WORDS), wo)["t_capture_ms"] == want,
+                   f"the queue of frame {k - 1}")
+        seen["queue"] = read_queue_mbpoll(port, wo)[1]
+
+    source.hooks = {31: lambda: read_at(31)}
+    run_loop(source, [writer])
+    entries = seen["queue"]["entries"]
+    assert len(entries) == 2
+    for e in entries:
+        d = min(math.dist((e["x_mm"], e["y_mm"]), (t["x_mm"], t["y_mm"])) for t in truth["objects"])
+        assert d < 0.5, e
+        assert e["flags"] & 1 == 1, e

@@ -67,7 +67,9 @@ def test_the_plain_belt_model_sees_the_moving_knurl_as_phantoms():
     _, frames = rendered(scene)
     config = TrackerConfig()
     poses, truths, _ = _run(scene, [f for f, _ in frames], config)
-    assert evaluate(poses, truths).false_objects > 0
+    acc = evaluate(poses, truths)
+    # The moving knurl joins parts and belt into shapes that are no boxes: phantoms, or parts lost in them.
+    assert acc.false_objects > 0 or acc.missed_frames > acc.visible_frames / 4, acc.summary()
 
 
 def test_the_same_belt_after_video_compression():

@@ -112,9 +112,13 @@ class MeasureConfig:
     # With a part height: a box outline fitting its edge points worse than this (px RMS) means
     # the part is no box (a cylinder lying down, a bag); its top-face rectangle is kept instead.
     box_max_rms_px: float = 1.0
+    # Touching parts. A box's silhouette is convex: a notch this deep (px) in a blob's outline is
+    # where two parts meet (a single part's pixel staircase and blur leave notches of about 1 px).
+    touch_min_notch_px: float = 3.0
 
     def __post_init__(self) -> None:
-        _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "box_max_rms_px")
+        _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "box_max_rms_px",
+                  "touch_min_notch_px")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
         try:
@@ -143,22 +147,38 @@ class TrackConfig:
     initial_angular_rate_sigma_deg_s: float = 100.0
     # A measurement farther than this from a track's prediction starts a new track.
     gate_mm: float = 30.0
-    # A young track (fewer than coast_min_hits measurements) with no blob for this many frames ends:
+    # A young track (not yet established, see coast_min_hits) with no blob for this many frames ends:
     # a one-off false detection is not kept (and listed to the PLC) for long.
     max_missed_frames: int = 5
     # An established track with no blob keeps its id this long while it is predicted in view: an arm
     # passing over a part hides it for 0.3-0.5 s, and the part must come back under the same id.
     max_coast_s: float = 0.6
-    # Measurements that make a track established (allowed to coast for max_coast_s).
+    # Measurements in a row at one size (see size_jump_mm) that make a track established: allowed to
+    # coast for max_coast_s, and checked for size jumps and merges. A growing sliver (a part coming
+    # into view, or leaving the ghost of its start position) is not established.
     coast_min_hits: int = 3
     # ... and it must move with the belt: a still blob that vanishes (the ghost of a part that was in
     # view at start, a part lifted off a stopped belt) ends after max_missed_frames like a young track.
     coast_min_speed_mm_s: float = 20.0
+    # An established track's blob whose length or width differs from the part's by more than the larger
+    # of these is not a measurement of it: the part is partly hidden (an arm, a bracket), or another
+    # part touches it flush. It coasts meanwhile (up to max_coast_s, then the new size is taken).
+    size_jump_mm: float = 4.0
+    size_jump_fraction: float = 0.08
+    # ... or by more than this many times the scatter of its own measured sizes (a running mean that
+    # gives each new measurement this weight): on real footage sizes scatter by several mm.
+    size_jump_sigmas: float = 4.0
+    size_scatter_weight: float = 0.2
+    # ... and the blobs of the frames just before were partly hidden already: the track goes back to its
+    # state this many updates earlier (its velocity untouched by them) and coasts from there.
+    rewind_frames: int = 3
     # A track's height estimate is converged once its 1-sigma uncertainty is below this (mm).
     height_converged_sigma_mm: float = 0.3
 
     def __post_init__(self) -> None:
         _positive(self, *(f.name for f in fields(self)))
+        if self.size_scatter_weight > 1:
+            raise BadInput(f"track.size_scatter_weight: expected a weight in (0, 1], got {self.size_scatter_weight}")
 
 
 @dataclass(frozen=True)

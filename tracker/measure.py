@@ -12,7 +12,7 @@ rectangle is still a rectangle.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -21,6 +21,7 @@ from tracker.box import BoxCamera
 from tracker.boxfit import fit_box
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
+from tracker.split import SplitRule, split_blob
 from tracker.undistort import BeltMapper
 
 # Pixels on each side of a crossing that the coverage sum spans (covers blur up to ~4 px).
@@ -45,6 +46,10 @@ class Measurement:
     # The part's height from this view when estimated (with its 1-sigma uncertainty), else None.
     height_mm: float | None = None
     height_sigma_mm: float = math.inf
+    # False: touching or lying on another part, or parts that could not be told apart (see split.py).
+    pickable: bool = True
+    # Cut from a blob of touching parts.
+    piece: bool = False
 
 
 class Measurer:
@@ -58,24 +63,32 @@ class Measurer:
         self._box_camera = BoxCamera(mapper.calibration)
         # A box outline that misses its edge points by more than this (px RMS) is no box.
         self._max_rms_norm = config.box_max_rms_px / float(mapper.calibration.camera_matrix[0, 0])
+        self._split_rule = SplitRule(config.touch_min_notch_px, self._min_area_px)
 
     def __call__(self, frame: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> list[Measurement]:
         """Measure every blob of ``mask``; ``reference`` is the empty belt (float32 or uint8)."""
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        contours = [c for c in contours if cv2.contourArea(c) >= self._min_area_px]
+        # Every blob that may be a part: what a part's edge windows must not reach into.
+        parts = np.zeros(mask.shape, dtype=np.uint8)
+        cv2.drawContours(parts, contours, -1, 255, thickness=cv2.FILLED)
         found = []
         for contour in contours:
-            if cv2.contourArea(contour) < self._min_area_px:
-                continue
-            m = self._measure(frame, reference, contour)
-            if m is not None:
-                found.append(m)
+            split = split_blob(contour, self._split_rule)
+            for piece in split.pieces:
+                m = self._measure(frame, reference, piece, parts, piece=len(split.pieces) > 1)
+                if m is not None:
+                    # A blob that is not one box and cannot be cut into boxes: never a pick target.
+                    found.append(m if split.clean else replace(m, pickable=False))
         # Deterministic order for the tracker: left to right, top to bottom in the image.
         found.sort(key=lambda m: (m.bbox_px[0], m.bbox_px[1]))
         return found
 
-    def _measure(self, frame, reference, contour) -> Measurement | None:
+    def _measure(self, frame, reference, contour, parts, piece: bool = False) -> Measurement | None:
+        """One part; ``parts``: the mask of every blob; ``piece``: the contour was cut from a larger blob."""
         cfg = self.config
         x, y, w, h = cv2.boundingRect(contour)
+        others = self._others(contour, (x, y, w, h), parts)
         b = cfg.border_margin_px
         clipped = x < b or y < b or x + w > self._width - b or y + h > self._height - b
         # The hull in pixels maps to the hull on the belt closely enough for the area test
@@ -86,7 +99,7 @@ class Measurer:
         points_px = None
         height: tuple[float | None, float] = (None, math.inf)
         if cfg.subpixel and not clipped:
-            points_px = self._edge_points(frame, reference, contour, (x, y, w, h))
+            points_px = self._edge_points(frame, reference, contour, (x, y, w, h), others)
         if points_px is None or len(points_px) < 12:
             # Binary staircase: boundary pixel centres sit half a pixel inside the edge.
             points_px = contour.reshape(-1, 2).astype(np.float64)
@@ -102,7 +115,26 @@ class Measurer:
                     if cfg.estimate_height:
                         height = (box.height_mm, box.height_sigma_mm)
         centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
-        return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px), *height)
+        # Another part within reach of its edges touches it, or nearly: not a pick (contract 4b).
+        return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px), *height,
+                           pickable=others is None, piece=piece)
+
+    def _window(self, bbox) -> tuple[int, int, int, int]:
+        """The pixels examined for a blob's edges: its bounding box and a margin (x0, y0, x1, y1)."""
+        x, y, w, h = bbox
+        m = self.config.roi_margin_px
+        return max(0, x - m), max(0, y - m), min(self._width, x + w + m), min(self._height, y + h + m)
+
+    def _others(self, contour, bbox, parts) -> np.ndarray | None:
+        """Pixels of the blob's window that belong to (or neighbour) other parts; None when there are none."""
+        x0, y0, x1, y1 = self._window(bbox)
+        own = np.zeros((y1 - y0, x1 - x0), dtype=np.uint8)
+        cv2.drawContours(own, [contour], -1, 255, thickness=cv2.FILLED, offset=(-x0, -y0))
+        other = cv2.bitwise_and(parts[y0:y1, x0:x1], cv2.bitwise_not(own))
+        if not cv2.countNonZero(other):
+            return None
+        # Their blurred rims too, which the mask leaves out.
+        return cv2.dilate(other, _ERODE) > 0
 
     def _fit_box(self, norm: np.ndarray, rect: Rect):
         cfg = self.config
@@ -115,19 +147,20 @@ class Measurer:
         fits = [f for f in fits if f is not None]
         return min(fits, key=lambda f: f.cost) if fits else None
 
-    def _edge_points(self, frame, reference, contour, bbox) -> np.ndarray | None:
+    def _edge_points(self, frame, reference, contour, bbox, blocked=None) -> np.ndarray | None:
+        """Sub-pixel edge points (Nx2 px); ``blocked``: window pixels of other parts, which no edge's
+        window may reach (there the next part is no belt)."""
         cfg = self.config
-        x, y, w, h = bbox
-        m = cfg.roi_margin_px
-        x0, y0 = max(0, x - m), max(0, y - m)
-        x1, y1 = min(self._width, x + w + m), min(self._height, y + h + m)
+        x0, y0, x1, y1 = self._window(bbox)
         img8 = frame[y0:y1, x0:x1]
         ref = reference[y0:y1, x0:x1].astype(np.float32)
-        blob = np.zeros(img8.shape, dtype=np.uint8)
-        cv2.drawContours(blob, [contour], -1, 255, thickness=cv2.FILLED, offset=(-x0, -y0))
-        zone = cv2.dilate(blob, _ZONE)
+        piece = np.zeros(img8.shape, dtype=np.uint8)
+        cv2.drawContours(piece, [contour], -1, 255, thickness=cv2.FILLED, offset=(-x0, -y0))
+        # The belt is read around this part and the others next to it.
+        whole = piece if blocked is None else cv2.bitwise_or(piece, blocked.astype(np.uint8) * 255)
+        zone = cv2.dilate(whole, _ZONE)
         belt = cv2.bitwise_not(zone)
-        inner = cv2.erode(blob, _ERODE)
+        inner = cv2.erode(piece, _ERODE)
         if cv2.countNonZero(belt) < 16 or cv2.countNonZero(inner) < 16:
             return None
         # Lighting gain of this frame against the reference, from the belt around the blob.
@@ -136,11 +169,12 @@ class Measurer:
         # Pixel = (1 - c) * belt + c * part: the part's own level is uniform, the belt's is
         # not (shading), so the contrast is taken per pixel against the local reference.
         part_level = _median_u8(img8, inner)
-        inside = blob > 0
+        inside = piece > 0
         local = cfg.part_height_mm > 0 or cfg.estimate_height
         k = HALF_WINDOW_PX
-        rows = _boundary_crossings(img8, belt_level, part_level, inside, cfg.min_contrast, k, local)
-        cols = _boundary_crossings(img8.T, belt_level.T, part_level, inside.T, cfg.min_contrast, k, local)
+        rows = _boundary_crossings(img8, belt_level, part_level, inside, cfg.min_contrast, k, local, blocked)
+        cols = _boundary_crossings(img8.T, belt_level.T, part_level, inside.T, cfg.min_contrast, k, local,
+                                   None if blocked is None else blocked.T)
         if rows is None or cols is None:
             return None
         points = np.concatenate([rows, cols[:, ::-1]])
@@ -161,7 +195,8 @@ def _median_u8(image: np.ndarray, mask: np.ndarray) -> float:
 
 
 def _boundary_crossings(img8: np.ndarray, belt: np.ndarray, part_level: float, inside: np.ndarray,
-                        min_contrast: float, half_window: int, local: bool = False) -> np.ndarray | None:
+                        min_contrast: float, half_window: int, local: bool = False,
+                        blocked: np.ndarray | None = None) -> np.ndarray | None:
     """Sub-pixel edge positions where each row crosses the blob's outer boundary: Nx2 (col, row).
 
     The window of each crossing starts at the blob's first (last) pixel of the row and
@@ -170,6 +205,7 @@ def _boundary_crossings(img8: np.ndarray, belt: np.ndarray, part_level: float, i
     transposed call takes the other edges. None when the contrast is too low to trust.
     ``local``: the part's level is read just inside each crossing instead of ``part_level``
     (a box's side faces are shaded unlike its top, and they bound the silhouette too).
+    ``blocked``: pixels no window may reach (another part touching this one).
     """
     k = half_window
     n_rows, n_cols = inside.shape
@@ -191,6 +227,9 @@ def _boundary_crossings(img8: np.ndarray, belt: np.ndarray, part_level: float, i
         cols = start[:, None] + offsets + k  # the window: 2k pixels around the boundary
         fits = (cols[:, 0] >= 0) & (cols[:, -1] < n_cols)
         rr, cols = rr[fits], cols[fits]
+        if blocked is not None:
+            free = ~blocked[rr[:, None], cols].any(axis=1)
+            rr, cols = rr[free], cols[free]
         if not len(rr):
             continue
         belt_w = belt[rr[:, None], cols]

@@ -48,6 +48,7 @@ class TrackedObject:
             "corners_mm": [[round(float(x), r), round(float(y), r)] for x, y in self.corners_mm],
             "vx_mm_s": round(self.vx_mm_s, r), "vy_mm_s": round(self.vy_mm_s, r),
             "height_mm": round(self.height_mm, r), "measured": self.measured,
+            "pickable": self.pickable, "height_converged": self.height_converged,
         }
 
 

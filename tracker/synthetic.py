@@ -86,6 +86,8 @@ class PartSpec:
     vy_mm_s: float = 0.0
     omega_deg_s: float = 0.0
     intensity: float = 200.0
+    # Height of its bottom face above the belt: a part lying on another one, or a bracket over the belt.
+    z_mm: float = 0.0
 
     def pose(self, t_s: float) -> tuple[float, float, float]:
         return (
@@ -114,6 +116,8 @@ class SceneSpec:
     belt_texture: float = 0.0
     belt_texture_period_mm: float = 6.0
     belt_velocity_mm_s: tuple[float, float] = (0.0, 0.0)
+    # Fixed things above the belt (a bracket, a sensor): drawn over the parts, never in the truth.
+    occluders: tuple[PartSpec, ...] = ()
 
     def t_ns(self, index: int) -> int:
         """Capture time of frame ``index``: the middle of its exposure."""
@@ -174,7 +178,7 @@ class Renderer:
             for o_i, d_i, lo, hi in (
                 (ox, dx, -part.length_mm / 2, part.length_mm / 2),
                 (oy, dy, -part.width_mm / 2, part.width_mm / 2),
-                (oz, dz, -part.height_mm, 0.0),
+                (oz, dz, -part.z_mm - part.height_mm, -part.z_mm),
             ):
                 t1, t2 = (lo - o_i) / d_i, (hi - o_i) / d_i
                 parallel = d_i == 0
@@ -237,9 +241,12 @@ class Renderer:
         times = self._sample_times(index)
         if sc.belt_texture:
             image += self._texture(times)
-        truth = []
+        truth: list[dict | None] = [None] * len(sc.parts)
         h, w = image.shape
-        for part_id, part in enumerate(sc.parts):
+        # Painted from the belt up: a part lying on another one hides it; occluders hide everything.
+        order = sorted(range(len(sc.parts)), key=lambda i: sc.parts[i].z_mm)
+        for part_id in [*order, *range(-len(sc.occluders), 0)]:
+            part = sc.parts[part_id] if part_id >= 0 else sc.occluders[part_id]
             poses = [part.pose(float(t)) for t in times]
             roi = self._roi(part, poses)
             visible_px = 0
@@ -256,7 +263,8 @@ class Renderer:
                 if visible_px:
                     border_px = int(min(rows.min() + r0, cols.min() + c0,
                                         h - 1 - (rows.max() + r0), w - 1 - (cols.max() + c0)))
-            truth.append(self._truth(part_id, part, index, visible_px, border_px))
+            if part_id >= 0:
+                truth[part_id] = self._truth(part_id, part, index, visible_px, border_px)
         if sc.flicker:
             image *= 1.0 + rng.uniform(-sc.flicker, sc.flicker)
         if sc.noise_sigma:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 
 import cv2
@@ -25,6 +26,22 @@ class Track:
         self.hits = 1  # frames with a measurement
         self.seen_ns = t_ns  # time of the last frame with a blob (clipped or not)
         self.age_frames = 0  # frames since the last (unclipped) measurement
+        # Whether the arm may take it: False while it touches or lies on another part.
+        self.pickable = m.pickable
+        # Since when its blobs have had another size than the part (partly hidden, or joined by another).
+        self.odd_size_since_ns: int | None = None
+        # Consecutive measurements of one size: a part whose size has settled can be checked against it
+        # (a growing sliver, as a part comes into view or leaves its start position, has not).
+        self.same_size = 0
+        # How much its measured sizes scatter (mm^2, a running mean): real segmentation is noisier
+        # than rendered scenes, and a size jump is judged against the part's own scatter.
+        self.size_var_mm2 = 0.0
+        # A part first seen as a piece of a blob (see split.py) is reported once its size has settled:
+        # the cuts of odd blobs (a part leaving the ghost of its start position) give growing slivers.
+        self.tentative = m.piece
+        # Filter states after the last few updates, oldest first: the blobs just before a size jump
+        # were already partly hidden, so the state is taken back to before them (see rewind).
+        self._history: deque = deque(maxlen=cfg.rewind_frames + 1)
         # The height from every view so far, weighted by its certainty (1 / sigma^2).
         self._height_weight = 0.0
         self._height_sum = 0.0
@@ -48,8 +65,43 @@ class Track:
             self.t_ns = t_ns
             self._normalise()
 
-    def update(self, m: Measurement) -> None:
+    def size_jump(self, m: Measurement, cfg: TrackConfig) -> float:
+        """How much larger (> 0) or smaller (< 0) the blob is than the part, beyond the tolerance; else 0."""
+        scatter_mm = cfg.size_jump_sigmas * math.sqrt(self.size_var_mm2)
+        worst = 0.0
+        for d, p in zip(self._size_residuals(m), sorted(self.kf.x[[LENGTH, WIDTH], 0]), strict=True):
+            if abs(d) > max(cfg.size_jump_mm, cfg.size_jump_fraction * p, scatter_mm) and abs(d) > abs(worst):
+                worst = d
+        return worst
+
+    def _size_residuals(self, m: Measurement) -> np.ndarray:
+        """Blob minus part, shorter sides first (mm)."""
+        return np.sort([m.rect.length_mm, m.rect.width_mm]) - np.sort(self.kf.x[[LENGTH, WIDTH], 0])
+
+    def rewind(self, t_ns: int, cfg: TrackConfig) -> None:
+        """Back to the state of ``rewind_frames`` updates ago, predicted to ``t_ns``."""
+        if len(self._history) < 2:
+            return
+        then_ns, x, p = self._history[0]
+        self.kf.x, self.kf.P, self.t_ns = x.copy(), p.copy(), then_ns
+        self.predict(t_ns, cfg)
+        self._history.clear()
+
+    def restart(self, m: Measurement, cfg: TrackConfig) -> None:
+        """Take the blob's size as the part's after all (it has kept it for max_coast_s)."""
+        self.kf = make_filter(np.array([m.rect.x_mm, m.rect.y_mm, m.rect.angle_deg, m.rect.length_mm,
+                                        m.rect.width_mm]), cfg)
+        self.odd_size_since_ns = None
+
+    def settled(self, cfg: TrackConfig) -> bool:
+        return self.same_size >= cfg.coast_min_hits
+
+    def update(self, m: Measurement, cfg: TrackConfig) -> None:
+        self.same_size = self.same_size + 1 if not self.size_jump(m, cfg) else 0
+        a = cfg.size_scatter_weight
+        self.size_var_mm2 = (1 - a) * self.size_var_mm2 + a * float(np.mean(self._size_residuals(m) ** 2))
         self._add_height(m)
+        self.pickable = m.pickable
         r = m.rect
         predicted = float(self.kf.x[ANGLE, 0])
         # The rectangle's two axes are both candidates for the tracked "long side":
@@ -62,6 +114,7 @@ class Track:
             z = [r.x_mm, r.y_mm, predicted + d_short, r.width_mm, r.length_mm]
         self.kf.update(np.array(z, dtype=np.float64).reshape(5, 1))
         self._normalise()
+        self._history.append((self.t_ns, self.kf.x.copy(), self.kf.P.copy()))
 
     def _normalise(self) -> None:
         """Keep the angle in (-90, 90] and the length the longer side (180 deg symmetry)."""
@@ -84,14 +137,14 @@ class Track:
         return TrackedObject(
             self.id, float(x[X]), float(x[Y]), float(x[ANGLE]), float(x[LENGTH]), float(x[WIDTH]),
             corners, float(x[VX]), float(x[VY]), measured is not None, measured, height_mm=height,
-            height_converged=converged, age_frames=self.age_frames,
+            height_converged=converged, age_frames=self.age_frames, pickable=self.pickable,
         )
 
     def ended(self, t_ns: int, cfg: TrackConfig) -> bool:
         """No blob for too long: time for an established track moving with the belt (a part an arm passes
         over), frames for any other."""
         speed = math.hypot(float(self.kf.x[VX, 0]), float(self.kf.x[VY, 0]))
-        if self.hits < cfg.coast_min_hits or speed < cfg.coast_min_speed_mm_s:
+        if not self.settled(cfg) or speed < cfg.coast_min_speed_mm_s:
             return self.missed > cfg.max_missed_frames
         return t_ns - self.seen_ns > cfg.max_coast_s * 1e9
 
@@ -110,9 +163,14 @@ class Tracker:
         cfg = self.config
         for track in self.tracks:
             track.predict(t_ns, cfg)
+        merged = self._merged(measurements)
         pairs = []
         for ti, track in enumerate(self.tracks):
+            if ti in merged:
+                continue
             for mi, m in enumerate(measurements):
+                if mi in merged.values():
+                    continue
                 d = math.dist(track.position, (m.rect.x_mm, m.rect.y_mm))
                 # A clipped blob's centre is off the part's: allow for half the part.
                 # A centroid inside the predicted part (half its width) is that part whatever its size:
@@ -128,9 +186,22 @@ class Tracker:
             if ti not in track_to_m and mi not in used:
                 track_to_m[ti] = mi
                 used.add(mi)
+        used.update(merged.values())
         out, alive = [], []
         for ti, track in enumerate(self.tracks):
             m = measurements[track_to_m[ti]] if ti in track_to_m else None
+            if ti in merged:
+                # One blob holds this part and another: neither can be measured, nor picked.
+                m = measurements[merged[ti]]
+                track.pickable = False
+                if track.odd_size_since_ns is None:
+                    track.odd_size_since_ns = t_ns
+                    track.rewind(t_ns, cfg)
+            elif m is not None and not m.clipped and track.settled(cfg):
+                m = self._check_size(track, m, t_ns)
+            elif m is not None and not m.clipped and track.size_jump(m, cfg):
+                # A young track takes the size it is measured at now (its first blob was a sliver).
+                track.restart(m, cfg)
             if m is None:
                 track.missed += 1
                 x, y = track.position
@@ -139,8 +210,8 @@ class Tracker:
             else:
                 track.missed = 0
                 track.seen_ns = t_ns
-            if m is not None and not m.clipped:
-                track.update(m)
+            if m is not None and not m.clipped and ti not in merged and track.odd_size_since_ns is None:
+                track.update(m, cfg)
                 track.hits += 1
                 track.age_frames = 0
                 out.append(track.output(m))
@@ -155,16 +226,52 @@ class Tracker:
                 alive.append(track)
                 out.append(track.output(m))
         self.tracks = alive
-        return tuple(sorted(out, key=lambda o: o.id))
+        shown = {t.id for t in alive if not t.tentative or t.settled(cfg)}
+        for t in alive:
+            t.tentative = t.id not in shown
+        return tuple(sorted((o for o in out if o.id in shown), key=lambda o: o.id))
+
+    def _check_size(self, track: Track, m: Measurement, t_ns: int) -> Measurement:
+        """A blob of another size than its established part is not a measurement of it: the part is partly
+        hidden (an arm, a bracket; smaller) or another part has joined it (larger: then it is not pickable).
+        A size kept for max_coast_s is the part's own after all (its first blobs were wrong)."""
+        cfg = self.config
+        jump = track.size_jump(m, cfg)
+        if not jump:
+            track.odd_size_since_ns = None
+            return m
+        if track.odd_size_since_ns is None:
+            track.odd_size_since_ns = t_ns
+            track.rewind(t_ns, cfg)
+        if t_ns - track.odd_size_since_ns > cfg.max_coast_s * 1e9:
+            track.restart(m, cfg)
+            return m
+        if jump > 0:
+            track.pickable = False
+        return m
+
+    def _merged(self, measurements: list[Measurement]) -> dict[int, int]:
+        """Settled tracks whose predicted centres lie inside one blob with another's: track -> blob."""
+        out: dict[int, int] = {}
+        for mi, m in enumerate(measurements):
+            if m.clipped or m.piece:
+                continue
+            outline = m.rect.corners().astype(np.float32)
+            inside = [ti for ti, t in enumerate(self.tracks) if t.settled(self.config)
+                      and cv2.pointPolygonTest(outline, tuple(map(float, t.position)), False) >= 0]
+            if len(inside) > 1:
+                out.update(dict.fromkeys(inside, mi))
+        return out
 
     def _inside_known(self, m: Measurement, tracks: list[Track], measurements: list[Measurement]) -> bool:
         """Whether the blob is a piece of a known part rather than a new one: its centre lies within a
-        tracked part (half its length from its centre), or next to a part running out of view (within
-        the gate of a clipped blob's rectangle). Parts lie flat and apart, so such a blob is a
-        fragment, or the rest of a part tipping off the belt's end."""
+        tracked part's predicted rectangle, or next to a part running out of view (within the gate of a
+        clipped blob's rectangle). Parts do not stand on each other's centres, so such a blob is a
+        fragment (a part half under a bracket), or the rest of a part tipping off the belt's end."""
         for track in tracks:
-            reach = max(self.config.gate_mm, float(track.kf.x[LENGTH, 0]) / 2)
-            if math.dist(track.position, (m.rect.x_mm, m.rect.y_mm)) <= reach:
+            x = track.kf.x[:, 0]
+            outline = rectangle_corners(x[X], x[Y], x[ANGLE], x[LENGTH], x[WIDTH]).astype(np.float32)
+            if cv2.pointPolygonTest(outline, (m.rect.x_mm, m.rect.y_mm), False) >= 0:
                 return True
         for other in measurements:
             if other.clipped:
