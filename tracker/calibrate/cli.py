@@ -12,10 +12,13 @@ from tracker import calibration as calibfile
 from tracker.calibrate import report
 from tracker.calibrate.belt import belt_from_board, belt_from_points, draw_preview, read_pairs
 from tracker.calibrate.board import DETECTORS, parse_pattern
+from tracker.calibrate.capture import CaptureSettings
 from tracker.calibrate.images import read_all_same_size, read_grey
 from tracker.calibrate.intrinsics import calibrate_intrinsics
 from tracker.calibrate.settings import DEFAULTS
 from tracker.errors import BadInput
+
+CAPTURE = CaptureSettings()
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -34,6 +37,30 @@ def register(sub: argparse._SubParsersAction) -> None:
     i.add_argument("--report", metavar="REPORT.json", help="also write the quality report as JSON")
     i.add_argument("--preview", metavar="DIR", help="write each view with its detected corners as PNG here")
     i.set_defaults(func=run_intrinsics)
+
+    c = csub.add_parser("capture", help="intrinsics from a live camera or a video: good views kept automatically",
+                        description="Watches SRC (a camera index, a video, an image pattern) for the board and "
+                        "keeps the views that are sharp and new (board moved, resized or tilted), showing "
+                        "the coverage of the image and the tilt directions reached; stops when there are "
+                        "enough (or at the end of a video, or on Ctrl-C), saves the views next to CALIB and "
+                        "calibrates them exactly as 'calibrate intrinsics' does.")
+    c.add_argument("--source", required=True, metavar="SRC", help="camera index, video file or image pattern")
+    _board_args(c, required=True)
+    c.add_argument("--out", required=True, metavar="CALIB", help="calibration file to write (.yaml/.yml/.xml)")
+    c.add_argument("--views", metavar="DIR", help="where the kept views go (default: CALIB's name + .views); "
+                   "must be new or empty")
+    c.add_argument("--target-views", type=int, default=CAPTURE.target_views,
+                   help="views wanted once coverage and tilts are reached (default %(default)s)")
+    c.add_argument("--max-views", type=int, default=CAPTURE.max_views,
+                   help="stop at this many views whatever the coverage (default %(default)s)")
+    c.add_argument("--min-views", type=int, default=DEFAULTS.min_views,
+                   help="fewest usable views (default %(default)s)")
+    c.add_argument("--fix-k3", action="store_true", help="fit k1 k2 p1 p2 only (k3 = 0), for mild lenses")
+    c.add_argument("--max-rms", type=float, default=DEFAULTS.max_rms_px,
+                   help="refuse a calibration whose RMS exceeds this, px (default %(default)s)")
+    c.add_argument("--report", metavar="REPORT.json", help="also write the quality report as JSON")
+    c.add_argument("--quiet", action="store_true", help="no status line")
+    c.set_defaults(func=_run_capture)
 
     b = csub.add_parser("belt", help="the belt pose from a board lying flat on the belt (or --points)")
     b.add_argument("image", nargs="?", metavar="IMAGE")
@@ -95,14 +122,32 @@ def _check_dir(path: Path) -> None:
 
 def run_intrinsics(args: argparse.Namespace) -> int:
     pattern = parse_pattern(args.pattern, args.square)
+    out, report_path = check_intrinsics_args(args)
+    images, _ = read_all_same_size(args.images)
+    return calibrate_and_write(args.images, images, pattern, out, report_path, args)
+
+
+def _run_capture(args: argparse.Namespace) -> int:
+    from tracker.calibrate.cli_capture import run_capture  # noqa: PLC0415 - only this command
+
+    return run_capture(args)
+
+
+def check_intrinsics_args(args: argparse.Namespace) -> tuple[Path, Path | None]:
+    """The output and report paths, checked before any work (shared with ``calibrate capture``)."""
     out = _check_out(args.out)
     if args.min_views < 3:
         raise BadInput(f"--min-views: expected at least 3, got {args.min_views}")
     report_path = Path(args.report) if args.report else None
     if report_path:
         _check_dir(report_path)
-    images, _ = read_all_same_size(args.images)
-    result = calibrate_intrinsics(args.images, images, pattern, args.min_views, args.fix_k3, args.detector)
+    return out, report_path
+
+
+def calibrate_and_write(paths: list[str], images: list, pattern, out: Path, report_path: Path | None,
+                        args: argparse.Namespace) -> int:
+    """Calibrate, print the report, refuse or write: what ``calibrate intrinsics`` does with its views."""
+    result = calibrate_intrinsics(paths, images, pattern, args.min_views, args.fix_k3, args.detector)
     for line in report.intrinsics_text(result, args.max_rms):
         print(line)
     final = result.final
@@ -117,7 +162,7 @@ def run_intrinsics(args: argparse.Namespace) -> int:
         data = json.dumps(report.intrinsics_json(result, args.max_rms), indent=2).encode()
         report.write_atomic(report_path, data)
         print(f"wrote {report_path}")
-    if args.preview:
+    if getattr(args, "preview", None):
         folder = Path(args.preview)
         folder.mkdir(parents=True, exist_ok=True)
         for view, image in zip(result.views, images, strict=True):
