@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tracker.calibrate.board import Pattern, detect
+from tracker.calibrate.board import Pattern, find
 from tracker.calibrate.settings import DEFAULTS, CalibrateSettings
 from tracker.calibration import Calibration
 from tracker.errors import BadInput
@@ -53,11 +53,16 @@ def _check_size(calib: Calibration, image: np.ndarray, where: str) -> None:
 def belt_from_board(calib: Calibration, image: np.ndarray, where: str, pattern: Pattern,
                     detector: str = "auto", settings: CalibrateSettings = DEFAULTS) -> BeltResult:
     _check_size(calib, image, where)
-    found = detect(image, pattern, detector, settings)
+    found = find(image, pattern, detector, settings)
     if found is None:
+        if not isinstance(pattern, Pattern):
+            raise BadInput(f"{where}: no {pattern} board found (at least {settings.charuco_min_corners} "
+                           "corners, not all in one line)")
         raise BadInput(f"{where}: no {pattern} board found (COLSxROWS counts inner corners; the whole board "
                        "must be visible)")
     obj = pattern.object_points()
+    if getattr(found, "ids", None) is not None:
+        obj = obj[found.ids]
     img = found.corners
     k, d = calib.camera_matrix, calib.dist_coeffs
     ok, rvec, tvec = cv2.solvePnP(obj, img, k, d, flags=cv2.SOLVEPNP_IPPE)

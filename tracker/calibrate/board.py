@@ -104,6 +104,15 @@ def detect(
     return Detection(canonical_order(image, found.corners, pattern), found.method)
 
 
+def find(image: np.ndarray, board, detector: str = "auto", settings: CalibrateSettings = DEFAULTS):
+    """The board's corners in ``image`` (a Detection; with ``ids`` for a ChArUco board), or None."""
+    from tracker.calibrate.charuco import CharucoSpec, detect_charuco  # noqa: PLC0415 - only for ChArUco
+
+    if isinstance(board, CharucoSpec):
+        return detect_charuco(image, board, settings)
+    return detect(image, board, detector, settings)
+
+
 def _subpix_half_window(corners: np.ndarray, pattern: Pattern, settings: CalibrateSettings) -> int:
     """Largest half window that stays inside one square (a window spanning two corners biases both)."""
     grid = corners.reshape(pattern.rows, pattern.cols, 2)

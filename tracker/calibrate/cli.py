@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     i = csub.add_parser("intrinsics", help="K and distortion from ~15 chessboard views")
     i.add_argument("images", nargs="+", metavar="IMAGE")
-    _board_args(i, required=True)
+    _board_args(i, required=False, charuco=True)
     i.add_argument("--out", required=True, metavar="CALIB", help="calibration file to write (.yaml/.yml/.xml)")
     i.add_argument("--min-views", type=int, default=DEFAULTS.min_views,
                    help="fewest usable views (default %(default)s)")
@@ -64,7 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     b = csub.add_parser("belt", help="the belt pose from a board lying flat on the belt (or --points)")
     b.add_argument("image", nargs="?", metavar="IMAGE")
-    _board_args(b, required=False)
+    _board_args(b, required=False, charuco=True)
     b.add_argument("--calibration", required=True, metavar="CALIB", help="file from 'calibrate intrinsics'")
     b.add_argument("--out", metavar="CALIB2", help="write here instead of updating CALIB in place")
     b.add_argument("--points", metavar="PAIRS.csv", help="u, v, X, Y per line (>= 4 pairs) instead of a board")
@@ -82,6 +82,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--out", required=True, metavar="CALIB", help="calibration file to write (.yaml/.yml/.xml)")
     a.set_defaults(func=run_scale)
 
+    g = csub.add_parser("board", help="a printable board (PNG at true scale) with its settings printed on it",
+                        description="Writes the board at true scale on a sheet of paper at --dpi, the DPI "
+                        "recorded in the PNG, and the settings to give the calibration commands printed "
+                        "under it. A square is a whole number of dots: the sheet says what it measures.")
+    _board_args(g, required=False, charuco=True, detector=False)
+    g.add_argument("--out", required=True, metavar="FILE.png", help="the sheet to write (PNG)")
+    g.add_argument("--dpi", type=int, default=300, help="printer resolution (default %(default)s)")
+    g.add_argument("--paper", default="A4", help="A4, A3 or letter (default %(default)s)")
+    g.set_defaults(func=run_board)
+
     r = csub.add_parser("import-ros", help="intrinsics from a ROS camera_info YAML file (then: calibrate belt)",
                         description="Reads a camera_info YAML (as ROS camera_calibration writes it, or "
                         "'calibrate show --format ros'): image size, camera_matrix, distortion_model "
@@ -98,9 +108,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.set_defaults(func=run_show)
 
 
-def _board_args(p: argparse.ArgumentParser, required: bool) -> None:
+def _board_args(p: argparse.ArgumentParser, required: bool, charuco: bool = False, detector: bool = True) -> None:
     p.add_argument("--pattern", required=required, metavar="COLSxROWS", help="inner corners, e.g. 9x6")
     p.add_argument("--square", required=required, type=float, metavar="MM", help="square size in mm")
+    if charuco:
+        p.add_argument("--board", metavar="SPEC", help="a ChArUco board instead of --pattern/--square: "
+                       "charuco:COLSxROWS:SQUARE_MM:MARKER_MM:DICT (squares, e.g. charuco:11x8:20:14:DICT_5X5_100)")
+    if not detector:
+        return
     p.add_argument("--detector", choices=DETECTORS, default="auto",
                    help="classic findChessboardCorners + cornerSubPix, sb = findChessboardCornersSB, "
                         "auto = classic then sb (default)")
@@ -121,10 +136,23 @@ def _check_dir(path: Path) -> None:
 
 
 def run_intrinsics(args: argparse.Namespace) -> int:
-    pattern = parse_pattern(args.pattern, args.square)
+    pattern = board_from_args(args)
     out, report_path = check_intrinsics_args(args)
     images, _ = read_all_same_size(args.images)
     return calibrate_and_write(args.images, images, pattern, out, report_path, args)
+
+
+def board_from_args(args: argparse.Namespace):
+    """A chessboard Pattern from --pattern/--square, or a ChArUco board from --board."""
+    if getattr(args, "board", None):
+        if args.pattern is not None or args.square is not None:
+            raise BadInput("--board: give either --board or --pattern and --square, not both")
+        from tracker.calibrate.charuco import parse_board  # noqa: PLC0415 - only for ChArUco
+
+        return parse_board(args.board)
+    if args.pattern is None or args.square is None:
+        raise BadInput("expected --pattern COLSxROWS and --square MM (a chessboard), or --board SPEC (ChArUco)")
+    return parse_pattern(args.pattern, args.square)
 
 
 def _run_capture(args: argparse.Namespace) -> int:
@@ -167,7 +195,10 @@ def calibrate_and_write(paths: list[str], images: list, pattern, out: Path, repo
         folder.mkdir(parents=True, exist_ok=True)
         for view, image in zip(result.views, images, strict=True):
             colour = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-            if view.corners is not None:
+            if view.corners is not None and view.ids is not None:
+                cv2.aruco.drawDetectedCornersCharuco(colour, view.corners.astype("float32").reshape(-1, 1, 2),
+                                                     view.ids.reshape(-1, 1))
+            elif view.corners is not None:
                 cv2.drawChessboardCorners(colour, pattern.size, view.corners.astype("float32").reshape(-1, 1, 2), True)
             cv2.imwrite(str(folder / (Path(view.path).stem + ".png")), colour)
         print(f"wrote {len(result.views)} previews to {folder}")
@@ -195,9 +226,10 @@ def run_belt(args: argparse.Namespace) -> int:
         names = [str(n + 1) for n in range(len(px))]
         axis_mm = float(max(mm.max(axis=0) - mm.min(axis=0)) / 2)
     else:
-        if image is None or args.pattern is None or args.square is None:
-            raise BadInput("calibrate belt: expected IMAGE with --pattern and --square, or --points PAIRS.csv")
-        pattern = parse_pattern(args.pattern, args.square)
+        if image is None or (args.board is None and (args.pattern is None or args.square is None)):
+            raise BadInput("calibrate belt: expected IMAGE with --pattern and --square (or --board), "
+                           "or --points PAIRS.csv")
+        pattern = board_from_args(args)
         result = belt_from_board(calib, image, args.image, pattern, args.detector)
         axis_mm = 2 * pattern.square_mm
     for line in report.belt_text(result, names):
@@ -233,6 +265,21 @@ def run_scale(args: argparse.Namespace) -> int:
     calib = nadir_calibration(width, height, mm_per_px)
     calibfile.save(calib, out)
     print(f"tracker: wrote {out}: APPROXIMATE, {mm_per_px:.4g} mm/px, straight down, no distortion")
+    return 0
+
+
+def run_board(args: argparse.Namespace) -> int:
+    from tracker.calibrate.printable import make_sheet, png_bytes  # noqa: PLC0415 - only this command
+
+    board = board_from_args(args)
+    out = Path(args.out)
+    if out.suffix.lower() != ".png":
+        raise BadInput(f"{out}: expected a .png file")
+    _check_dir(out)
+    sheet = make_sheet(board, args.dpi, args.paper)
+    report.write_atomic(out, png_bytes(sheet))
+    print(f"wrote {out}: {args.paper} at {args.dpi} dpi; one square prints {sheet.square_mm:.3f} mm "
+          f"(print at 100 %, measure it, and give that size to the calibration commands)")
     return 0
 
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from tracker.calibrate.board import Pattern, board_continues, detect
+from tracker.calibrate.board import Pattern, board_continues, find
 from tracker.calibrate.settings import DEFAULTS, CalibrateSettings
 from tracker.errors import BadInput
 
@@ -21,6 +21,7 @@ class View:
     rms_px: float | None = None  # per-view reprojection RMS in the calibration that used it
     tilt_deg: float | None = None  # angle between the board's normal and the optical axis
     rejected: str | None = None  # why it was left out of the final calibration
+    ids: np.ndarray | None = None  # which of the board's corners ``corners`` are (ChArUco); None: all
 
 
 @dataclass
@@ -58,12 +59,12 @@ class IntrinsicsResult:
 
 
 def solve(pattern: Pattern, views: list[View], indices: list[int], size: tuple[int, int], flags: int) -> Solve:
-    obj = pattern.object_points().astype(np.float32)
-    objs = [obj] * len(indices)
+    every = pattern.object_points().astype(np.float32)
+    objs = [every if views[i].ids is None else every[views[i].ids] for i in indices]
     imgs = [views[i].corners.astype(np.float32).reshape(-1, 1, 2) for i in indices]
     rms, k, d, rvecs, tvecs = cv2.calibrateCamera(objs, imgs, size, None, None, flags=flags)
     per_view, tilts = [], []
-    for img, rvec, tvec in zip(imgs, rvecs, tvecs, strict=True):
+    for obj, img, rvec, tvec in zip(objs, imgs, rvecs, tvecs, strict=True):
         proj, _ = cv2.projectPoints(obj, rvec, tvec, k, d)
         per_view.append(float(np.sqrt(np.mean(np.sum((proj - img).reshape(-1, 2) ** 2, axis=1)))))
         rot, _ = cv2.Rodrigues(rvec)
@@ -96,9 +97,10 @@ def calibrate_intrinsics(
     views = []
     larger = 0  # views where the board goes on past the pattern
     for path, image in zip(paths, images, strict=True):
-        found = detect(image, pattern, detector, settings)
-        views.append(View(path, found.corners if found else None, found.method if found else None))
-        if found is not None and board_continues(image, found.corners, pattern):
+        found = find(image, pattern, detector, settings)
+        views.append(View(path, found.corners if found else None, found.method if found else None,
+                          ids=getattr(found, "ids", None)))
+        if found is not None and isinstance(pattern, Pattern) and board_continues(image, found.corners, pattern):
             larger += 1
     usable = [i for i, v in enumerate(views) if v.corners is not None]
     if not usable:

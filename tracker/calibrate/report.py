@@ -15,7 +15,8 @@ from tracker.calibration import Calibration
 
 def intrinsics_text(r: IntrinsicsResult, max_rms_px: float) -> list[str]:
     w, h = r.image_size
-    lines = [f"board {r.pattern} inner corners, {r.pattern.square_mm:g} mm squares; images {w}x{h}", ""]
+    what = f"{r.pattern}" if str(r.pattern).startswith("charuco:") else f"{r.pattern} inner corners"
+    lines = [f"board {what}, {r.pattern.square_mm:g} mm squares; images {w}x{h}", ""]
     lines.append(f"{'view':<32} {'corners':>8} {'rms px':>8} {'tilt deg':>9}  note")
     for v in r.views:
         name = os.path.basename(v.path)

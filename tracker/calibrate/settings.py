@@ -34,6 +34,9 @@ class CalibrateSettings:
     # (OpenCV's own test recipe) gives 0.767; the window also stays inside one square (board.py).
     subpix_half_window_max: int = 11
     subpix_half_window_min: int = 2
+    # A ChArUco view is used when it shows at least this many corners, not all on one line (fewer
+    # constrain the camera little and let one bad marker decode weigh much).
+    charuco_min_corners: int = 8
     subpix_criteria: tuple = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 40, 0.01)
 
 

@@ -66,7 +66,6 @@ class BoardRenderer:
 
     def _shade(self, rays: np.ndarray, rot: np.ndarray, t: np.ndarray) -> np.ndarray:
         """Grey level where each camera ray meets the board plane (background where it misses)."""
-        look, pat = self.look, self.pattern
         normal = rot[:, 2]
         denom = rays @ normal
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -74,14 +73,18 @@ class BoardRenderer:
         hit = np.isfinite(scale) & (scale > 0)
         points = rays * np.where(hit, scale, 0.0)[..., None]
         board = (points - t) @ rot  # camera -> board frame: R^T (X - t)
-        bx, by = board[..., 0] / pat.square_mm, board[..., 1] / pat.square_mm
+        return self._paint(board[..., 0], board[..., 1], hit).astype(np.float64)
+
+    def _paint(self, x_mm: np.ndarray, y_mm: np.ndarray, hit: np.ndarray) -> np.ndarray:
+        """The print's grey level at board point (x, y) mm; ``hit``: the ray meets the board's plane."""
+        look, pat = self.look, self.pattern
+        bx, by = x_mm / pat.square_mm, y_mm / pat.square_mm
         # Squares span -1..cols in x and -1..rows in y (square units); the print adds a white margin.
         m = look.margin_squares
         on_print = hit & (bx >= -1 - m) & (bx <= pat.cols + m) & (by >= -1 - m) & (by <= pat.rows + m)
         on_squares = (bx >= -1) & (bx < pat.cols) & (by >= -1) & (by < pat.rows)
         black = on_squares & ((np.floor(bx) + np.floor(by)) % 2 == 0)
-        grey = np.where(on_print, np.where(black, look.black, look.white), look.background)
-        return grey.astype(np.float64)
+        return np.where(on_print, np.where(black, look.black, look.white), look.background)
 
 
 def look_at_pose(target_cam_mm: np.ndarray, tilt_deg: float, tilt_dir_deg: float, spin_deg: float,
