@@ -69,14 +69,18 @@ class Measurer:
         """Measure every blob of ``mask``; ``reference`` is the empty belt (float32 or uint8)."""
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         contours = [c for c in contours if cv2.contourArea(c) >= self._min_area_px]
-        # Every blob that may be a part: what a part's edge windows must not reach into.
-        parts = np.zeros(mask.shape, dtype=np.uint8)
-        cv2.drawContours(parts, contours, -1, 255, thickness=cv2.FILLED)
+        boxes = [cv2.boundingRect(c) for c in contours]
+        parts = None  # every blob that may be a part, drawn only when two come near each other
         found = []
-        for contour in contours:
+        for n, contour in enumerate(contours):
             split = split_blob(contour, self._split_rule)
+            window = self._window(boxes[n])
+            near = len(split.pieces) > 1 or any(k != n and _overlap(window, b) for k, b in enumerate(boxes))
+            if near and parts is None:
+                parts = np.zeros(mask.shape, dtype=np.uint8)
+                cv2.drawContours(parts, contours, -1, 255, thickness=cv2.FILLED)
             for piece in split.pieces:
-                m = self._measure(frame, reference, piece, parts, piece=len(split.pieces) > 1)
+                m = self._measure(frame, reference, piece, parts if near else None, piece=len(split.pieces) > 1)
                 if m is not None:
                     # A blob that is not one box and cannot be cut into boxes: never a pick target.
                     found.append(m if split.clean else replace(m, pickable=False))
@@ -85,10 +89,11 @@ class Measurer:
         return found
 
     def _measure(self, frame, reference, contour, parts, piece: bool = False) -> Measurement | None:
-        """One part; ``parts``: the mask of every blob; ``piece``: the contour was cut from a larger blob."""
+        """One part; ``parts``: the mask of every blob (None: no other blob is near); ``piece``: the contour
+        was cut from a larger blob."""
         cfg = self.config
         x, y, w, h = cv2.boundingRect(contour)
-        others = self._others(contour, (x, y, w, h), parts)
+        others = None if parts is None else self._others(contour, (x, y, w, h), parts)
         b = cfg.border_margin_px
         clipped = x < b or y < b or x + w > self._width - b or y + h > self._height - b
         # The hull in pixels maps to the hull on the belt closely enough for the area test
@@ -181,6 +186,13 @@ class Measurer:
         if len(points) == 0:
             return None
         return points + [x0, y0]
+
+
+def _overlap(window: tuple[int, int, int, int], box: tuple[int, int, int, int]) -> bool:
+    """Whether a window (x0, y0, x1, y1) and a bounding box (x, y, w, h) share a pixel."""
+    x0, y0, x1, y1 = window
+    x, y, w, h = box
+    return x < x1 and x + w > x0 and y < y1 and y + h > y0
 
 
 def _median_u8(image: np.ndarray, mask: np.ndarray) -> float:
