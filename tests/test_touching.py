@@ -189,3 +189,16 @@ def test_a_shape_that_is_no_boxes_is_kept_whole_and_unclean():
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     split = split_blob(contours[0], RULE)
     assert len(split.pieces) == 1 and not split.clean
+
+
+def test_the_status_line_says_not_pickable_and_a_settling_height():
+    import dataclasses
+
+    from tracker.poses import FrameResult, TrackedObject
+    from tracker.runner import describe
+
+    o = TrackedObject(4, 12.0, -3.0, 10.0, 80.0, 50.0, np.zeros((4, 2)), 300.0, 0.0, True, height_mm=19.6,
+                      height_converged=False, pickable=False)
+    assert describe(FrameResult(7, 0, (o,))) == "#4 x=12.0 y=-3.0 a=10.0 h=19.6 settling (not pickable)"
+    flat = dataclasses.replace(o, height_mm=0.0, height_converged=True, pickable=True)
+    assert describe(FrameResult(7, 0, (flat,))) == "#4 x=12.0 y=-3.0 a=10.0"

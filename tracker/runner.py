@@ -126,8 +126,14 @@ def describe(result: FrameResult) -> str:
     if not result.objects:
         return "no part"
     o = result.objects[0]
-    flag = "" if o.measured else " (predicted)"
-    return f"#{o.id} x={o.x_mm:.1f} y={o.y_mm:.1f} a={o.angle_deg:.1f}{flag}"
+    flags = [] if o.measured else ["predicted"]
+    if not o.pickable:
+        flags.append("not pickable")
+    height = ""
+    if o.height_mm or not o.height_converged:
+        height = f" h={o.height_mm:.1f}" + ("" if o.height_converged else " settling")
+    flag = f" ({', '.join(flags)})" if flags else ""
+    return f"#{o.id} x={o.x_mm:.1f} y={o.y_mm:.1f} a={o.angle_deg:.1f}{height}{flag}"
 
 
 class Runner:
