@@ -179,3 +179,43 @@ def test_the_selector_wants_coverage_and_tilts_not_just_a_count():
         assert selector.offer(image, corners)
     assert selector.progress.kept == 20 and not selector.enough()
     assert selector.progress.cells < settings.min_cells
+
+
+def test_the_capture_shows_its_progress_on_the_live_page(video, tmp_path, monkeypatch, capsys):
+    """--web: while capturing, the page's state.json carries the progress and frame.jpg the corners."""
+    import json
+    import socket
+    import urllib.request
+
+    folder, frames, _ = video
+    from tracker import cli_run
+    from tracker.sources import Frame, FrameSource
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    seen = {}
+
+    class Camera(FrameSource):
+        name = "camera 0"
+
+        def __iter__(self):
+            for k, f in enumerate(frames[:24]):
+                if k == 20:  # frames 0-19 were offered: look at the page as a user would
+                    base = f"http://127.0.0.1:{port}/"
+                    seen["state"] = json.loads(urllib.request.urlopen(base + "state.json", timeout=5).read())
+                    seen["jpeg"] = urllib.request.urlopen(base + "frame.jpg", timeout=5).read()
+                yield Frame(k, k * 33_000_000, f)
+
+    monkeypatch.setattr(cli_run, "open_source", lambda spec, fps=None: Camera())
+    code = main(["calibrate", "capture", "--source", "0", "--pattern", "9x6", "--square", "20",
+                 "--out", str(tmp_path / "c.yaml"), "--min-views", "3", "--web", f"127.0.0.1:{port}"])
+    assert code == 0, capsys.readouterr()
+    cap = seen["state"]["capture"]
+    assert seen["state"]["frame"] == 19 and cap["views"] == 5 and cap["cells"] > 0, seen["state"]
+    assert "views" in seen["state"]["sinks"][0]
+    image = cv2.imdecode(np.frombuffer(seen["jpeg"], np.uint8), cv2.IMREAD_COLOR)
+    assert image.shape[:2] == frames[0].shape
+    # The frame is grey: the coverage grid's lines (green) are the overlay.
+    line = image[:, image.shape[1] // 4].astype(int)
+    assert np.mean(line[:, 1] - line[:, 2]) > 10  # grey frames give 0 (JPEG rounding: +-2)

@@ -101,6 +101,11 @@ class ViewSelector:
         p.kept, p.last = len(self.poses), "kept"
         return True
 
+    @property
+    def cells(self) -> np.ndarray:
+        """The coverage grid's cells (rows = image v) that corners of kept views have reached."""
+        return self._cells
+
     def enough(self) -> bool:
         s, p = self.settings, self.progress
         return p.kept >= s.max_views or (p.kept >= s.target_views and p.cells >= s.min_cells

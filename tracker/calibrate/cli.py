@@ -59,6 +59,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--max-rms", type=float, default=DEFAULTS.max_rms_px,
                    help="refuse a calibration whose RMS exceeds this, px (default %(default)s)")
     c.add_argument("--report", metavar="REPORT.json", help="also write the quality report as JSON")
+    c.add_argument("--web", metavar="HOST:PORT", help="show the camera, the corners found and the progress on a "
+                   "read-only web page there (like tracker run --web)")
     c.add_argument("--quiet", action="store_true", help="no status line")
     c.set_defaults(func=_run_capture)
 

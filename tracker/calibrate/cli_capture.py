@@ -28,6 +28,7 @@ def run_capture(args: argparse.Namespace) -> int:
     from tracker.cli_run import open_source  # noqa: PLC0415 - the source choice lives with the run
 
     source = open_source(args.source)
+    view, server = _web(args.web, settings) if args.web else (None, None)
     live = sys.stderr.isatty() and not args.quiet
     selector: ViewSelector | None = None
     paths: list[str] = []
@@ -41,7 +42,11 @@ def run_capture(args: argparse.Namespace) -> int:
             elif image.shape[:2] != (selector.size[1], selector.size[0]):
                 raise BadInput(f"{args.source}: frame {frame.index} is {image.shape[1]}x{image.shape[0]}, "
                                f"expected {selector.size[0]}x{selector.size[1]} like the first")
-            if selector.offer(image, _board(image, pattern, args.detector)):
+            corners = _board(image, pattern, args.detector)
+            kept = selector.offer(image, corners)
+            if view is not None:
+                view.submit(frame.index, image, corners, selector.progress, selector.cells)
+            if kept:
                 path = views_dir / f"view_{len(paths):03d}.png"
                 if not cv2.imwrite(str(path), image):
                     raise BadInput(f"{path}: cannot write the view")
@@ -55,6 +60,8 @@ def run_capture(args: argparse.Namespace) -> int:
         stopped_by = "Ctrl-C"
     finally:
         source.close()
+        if server is not None:
+            server.close()
     if live:
         print(file=sys.stderr)
     p = selector.progress if selector else Progress()
@@ -69,6 +76,18 @@ def run_capture(args: argparse.Namespace) -> int:
     print(f"capture: the same result again: tracker calibrate intrinsics {views_dir}/view_*.png "
           f"--pattern {args.pattern} --square {args.square:g} --out {out}")
     return calibrate_and_write(paths, images, pattern, out, report_path, args)
+
+
+def _web(spec: str, settings: CaptureSettings):
+    from plc.options import parse_endpoint  # noqa: PLC0415 - the same HOST:PORT rules as tracker run --web
+    from tracker.calibrate.capture_view import CaptureView  # noqa: PLC0415 - only with --web
+    from tracker.web import WebServer  # noqa: PLC0415 - only with --web
+
+    host, port = parse_endpoint(spec, "--web")
+    view = CaptureView(settings)
+    server = WebServer(view, host, port).start()
+    print(f"capture: live view on {server.url}", file=sys.stderr)
+    return view, server
 
 
 def _settings(args: argparse.Namespace) -> CaptureSettings:
