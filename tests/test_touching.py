@@ -202,3 +202,18 @@ def test_the_status_line_says_not_pickable_and_a_settling_height():
     assert describe(FrameResult(7, 0, (o,))) == "#4 x=12.0 y=-3.0 a=10.0 h=19.6 settling (not pickable)"
     flat = dataclasses.replace(o, height_mm=0.0, height_converged=True, pickable=True)
     assert describe(FrameResult(7, 0, (flat,))) == "#4 x=12.0 y=-3.0 a=10.0"
+
+
+def test_parts_near_but_apart_stay_pickable():
+    """Two parts turned 45 deg, one behind the other along their long axis with a 19 mm gap: their bounding
+    boxes overlap, their outlines are 15 px apart. Both are measured as usual and pickable."""
+    a = PartSpec(80, 50, 0, -520, 0, 45, V, 0)
+    b = PartSpec(80, 50, 0, -450, 70, 45, V, 0, intensity=170)
+    poses, truths = run_pipeline(_scene([a, b]))
+    checked = 0
+    for pose, both in _with_both(poses, truths):
+        checked += 1
+        assert len(pose["objects"]) == 2
+        for obj in pose["objects"]:
+            assert _nearest(obj, both)[0] < 0.1 and obj["pickable"] is True, (pose["frame"], obj)
+    assert checked >= 15

@@ -131,7 +131,8 @@ class Measurer:
         return max(0, x - m), max(0, y - m), min(self._width, x + w + m), min(self._height, y + h + m)
 
     def _others(self, contour, bbox, parts) -> np.ndarray | None:
-        """Pixels of the blob's window that belong to (or neighbour) other parts; None when there are none."""
+        """Pixels of the blob's window that belong to (or neighbour) other parts; None when none is within
+        reach of its edges' windows."""
         x0, y0, x1, y1 = self._window(bbox)
         own = np.zeros((y1 - y0, x1 - x0), dtype=np.uint8)
         cv2.drawContours(own, [contour], -1, 255, thickness=cv2.FILLED, offset=(-x0, -y0))
@@ -139,7 +140,11 @@ class Measurer:
         if not cv2.countNonZero(other):
             return None
         # Their blurred rims too, which the mask leaves out.
-        return cv2.dilate(other, _ERODE) > 0
+        blocked = cv2.dilate(other, _ERODE)
+        # Only what the edge windows reach counts (a bounding box's corners lie far from a turned part).
+        if not cv2.countNonZero(cv2.bitwise_and(blocked, cv2.dilate(own, _ZONE))):
+            return None
+        return blocked > 0
 
     def _fit_box(self, norm: np.ndarray, rect: Rect):
         cfg = self.config

@@ -88,7 +88,8 @@ class Track:
         self._history.clear()
 
     def restart(self, m: Measurement, cfg: TrackConfig) -> None:
-        """Take the blob's size as the part's after all (it has kept it for max_coast_s)."""
+        """Start the filter again from this blob: the part's size was wrong (a young track born of a sliver,
+        or an established one whose blobs have kept another size for max_coast_s)."""
         self.kf = make_filter(np.array([m.rect.x_mm, m.rect.y_mm, m.rect.angle_deg, m.rect.length_mm,
                                         m.rect.width_mm]), cfg)
         self.odd_size_since_ns = None
