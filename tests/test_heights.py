@@ -64,3 +64,21 @@ def test_auto_estimates_a_tall_box_seen_at_a_tilt():
     assert max(abs(h - 60.0) for h in third) <= 0.5, third
     s = evaluate(poses, truths, skip_first=2).summary()
     assert s["centroid_mean_mm"] <= 0.2 and s["angle_mean_deg"] <= 0.05, s
+
+
+def test_a_cylinder_lying_down_is_no_box_but_its_pose_stays_sane():
+    """A part that is no prism (a 40 mm cylinder lying down) with --part-height 40: the box outline does
+    not fit its silhouette exactly, yet the centroid and angle stay close (measured: 0.44 mm mean, 0.52 mm
+    p95, 0.41 deg) and far better than measuring it as flat (11.6 mm). Its reported width is the box fit's,
+    not the cylinder's (off by up to 18 mm): the README says so."""
+    cam = CameraSpec(width=480, height=360, focal_px=420.0, tilt_deg=20, yaw_deg=15)
+    # It comes into view from outside (no ghost of a start position in the first frame).
+    part = PartSpec(90, 40, 40, -560, -80, 20, 300, 40, omega_deg_s=20.0, intensity=190, shape="cylinder")
+    scene = SceneSpec(cam, (part,), fps=30, n_frames=100, supersample=4, blur_samples=3)
+    given, poses = _summary(scene, 40.0)
+    flat, _ = _summary(scene, 0.0)
+    assert given["missed_frames"] <= 3, given
+    assert given["centroid_p95_mm"] < 1.0 and given["angle_mean_deg"] < 1.0, given
+    assert flat["centroid_mean_mm"] > 10 * given["centroid_mean_mm"], (flat, given)
+    ids = {o["id"] for p in poses for o in p["objects"]}
+    assert len(ids) == 1, ids

@@ -88,6 +88,9 @@ class PartSpec:
     intensity: float = 200.0
     # Height of its bottom face above the belt: a part lying on another one, or a bracket over the belt.
     z_mm: float = 0.0
+    # "box", or "cylinder": lying down along its length, width_mm across (height_mm is ignored). A part
+    # that is no prism, for the limits of the box model.
+    shape: str = "box"
 
     def pose(self, t_s: float) -> tuple[float, float, float]:
         return (
@@ -173,6 +176,8 @@ class Renderer:
         dx = c * rays[..., 0] + s * rays[..., 1]
         dy = -s * rays[..., 0] + c * rays[..., 1]
         dz = rays[..., 2]
+        if part.shape == "cylinder":
+            return self._cylinder_hits(part, (ox, oy, oz), (dx, dy, dz))
         with np.errstate(divide="ignore", invalid="ignore"):
             near, far = [], []
             for o_i, d_i, lo, hi in (
@@ -191,6 +196,28 @@ class Renderer:
         hit = (t_near <= t_far) & (t_far > 0)
         # Axis whose slab is entered last is the face hit: z -> top (1), x -> 2, y -> 3.
         face = np.array([2, 3, 1], dtype=np.uint8)[near_all.argmax(axis=0)]
+        return np.where(hit, face, 0).astype(np.uint8)
+
+    @staticmethod
+    def _cylinder_hits(part: PartSpec, o: tuple, d: tuple) -> np.ndarray:
+        """A cylinder lying along the part's x: 1 where the ray meets its upper surface (facing up), 2 its
+        lower flanks, 3 its end caps (in the part's frame: o the camera centre, d the ray directions)."""
+        ox, oy, oz = o
+        dx, dy, dz = d
+        r = part.width_mm / 2
+        zc = -part.z_mm - r  # the axis (world Z points into the belt)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a = dy * dy + dz * dz
+            b = 2 * (oy * dy + (oz - zc) * dz)
+            disc = b * b - 4 * a * (oy * oy + (oz - zc) ** 2 - r * r)
+            root = np.sqrt(np.maximum(disc, 0.0))
+            t1, t2 = (-b - root) / (2 * a), (-b + root) / (2 * a)
+            tx1, tx2 = (-part.length_mm / 2 - ox) / dx, (part.length_mm / 2 - ox) / dx
+        tx_near, tx_far = np.minimum(tx1, tx2), np.maximum(tx1, tx2)
+        t_in, t_out = np.maximum(t1, tx_near), np.minimum(t2, tx_far)
+        hit = (disc > 0) & (t_in <= t_out) & (t_out > 0)
+        facing_up = (oz + t1 * dz - zc) / r < -0.7
+        face = np.where(t1 >= tx_near, np.where(facing_up, 1, 2), 3)
         return np.where(hit, face, 0).astype(np.uint8)
 
     def _roi(self, part: PartSpec, poses: list[tuple[float, float, float]]) -> tuple[int, int, int, int] | None:
