@@ -20,6 +20,7 @@ from plc_support import (
     mbpoll,
     mbpoll_write_u32,
     queue_scene,
+    require_mbpoll,
     run_loop,
     start_sim_process,
     stop_process,
@@ -177,6 +178,7 @@ def test_queue_and_handshake_end_to_end(n_parts, mode, order, tmp_path):
 def test_every_mbpoll_snapshot_is_one_queue_while_the_loop_runs(tmp_path):
     """An independent reader polling 100-219 as fast as it can while frames flow: each snapshot is a
     queue the tracker wrote as a whole."""
+    require_mbpoll()
     wo = WordOrder.ABCD
     rendered = Rendered(queue_scene(4))
     writer, sim, port = open_writer("client", wo, Health())
