@@ -1,19 +1,63 @@
-"""The outline a box (a right prism) standing on the belt casts into the camera.
+"""What a box (a right prism) standing on the belt shows the camera, face by face.
 
 A part is modelled as its footprint rectangle (x, y, angle, length, width) on the belt and a
 height h: its top face is the same rectangle h mm above the belt. Seen through a pinhole, the
-silhouette of that convex solid is the convex hull of its 8 corners' images: top-face edges
-where they bound it, bottom and vertical edges elsewhere. Coordinates here are undistorted,
-normalised image coordinates (x/z, y/z in the camera frame), where straight edges stay straight.
+box shows its top face and the one or two side faces that face the camera; together they make
+its silhouette. Coordinates here are undistorted, normalised image coordinates (x/z, y/z in the
+camera frame), where straight edges stay straight.
+
+Edges are measured as coverage sums across short windows of pixels (tracker/measure.py), each
+read against the level of one pixel just inside the edge. Each face adds its own level (a side
+face's is a fixed fraction of the top's: its shade) times its length in the window, so a window
+that holds a side face narrower than itself and then the top (a thin part's sliver, a bias of
+up to half a pixel when ignored) sums to more or less than the distance to its edge. The model
+below predicts each sum for a box pose, faces and shades included. As a sum stops changing once
+its edge has left the window, the fit first brings the box near with the plain outline (the
+hull of the 8 corners, against the edge points).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from tracker.calibration import Calibration
 from tracker.geometry import rectangle_corners
+
+# Face kinds: the top, the sides facing the part's own x (its ends) and those facing its y.
+TOP, SIDE_X, SIDE_Y = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class EdgeWindows:
+    """Coverage sums across a silhouette's edge, one per image row or column that crosses it.
+
+    Each window is a straight run of ``span_px`` pixels from ``inner_norm`` (its end inside the
+    part) outwards, ``step_norm`` per pixel (normalised coordinates, the lens's distortion taken
+    as linear over a few pixels); ``covered_px`` is how many pixels of it the part covers, in
+    units of the contrast of the pixel that spans ``level_px`` (from, to: px from the inner end).
+    """
+
+    inner_norm: np.ndarray  # (N, 2)
+    step_norm: np.ndarray  # (N, 2)
+    covered_px: np.ndarray  # (N,)
+    span_px: float
+    level_px: tuple[float, float]
+
+    def __post_init__(self) -> None:
+        n = len(self.covered_px)
+        if self.inner_norm.shape != (n, 2) or self.step_norm.shape != (n, 2):
+            raise ValueError(f"edge windows: expected (N, 2) ends and steps for N={n} sums, got "
+                             f"{self.inner_norm.shape} and {self.step_norm.shape}")
+
+    def __len__(self) -> int:
+        return len(self.covered_px)
+
+    def subset(self, which: np.ndarray) -> EdgeWindows:
+        return EdgeWindows(self.inner_norm[which], self.step_norm[which], self.covered_px[which], self.span_px,
+                           self.level_px)
 
 
 class BoxCamera:
@@ -22,14 +66,16 @@ class BoxCamera:
     def __init__(self, calibration: Calibration) -> None:
         self.rotation = calibration.rotation()
         self.translation = np.asarray(calibration.belt_tvec, dtype=np.float64).reshape(3)
+        # The camera's foot on the belt: a side face is seen from the side of its plane this is on.
+        self.nadir_mm = (-self.rotation.T @ self.translation)[:2]
 
     def project(self, world: np.ndarray) -> np.ndarray:
         cam = world @ self.rotation.T + self.translation
         return cam[:, :2] / cam[:, 2:3]
 
     def corners(self, params: np.ndarray, height_mm: float) -> np.ndarray:
-        """The 8 corners' normalised images: footprint first, then the top face."""
-        x, y, angle, length, width = params
+        """The 8 corners' normalised images: footprint first (counter-clockwise), then the top face."""
+        x, y, angle, length, width = params[:5]
         foot = rectangle_corners(x, y, angle, length, width)
         world = np.zeros((8, 3))
         world[:4, :2] = foot
@@ -45,6 +91,22 @@ class BoxCamera:
         # The hull's vertices chosen in float32 (all OpenCV takes), their coordinates kept in float64.
         index = cv2.convexHull(pts.astype(np.float32).reshape(-1, 1, 2), returnPoints=False)
         return pts[index.reshape(-1)]
+
+    def faces(self, params: np.ndarray, height_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """The faces the camera sees: polygons (F, 4, 2) in normalised coordinates and their kinds (F,)."""
+        pts = self.corners(params, height_mm)
+        polygons, kinds = [pts[4:]], [TOP]
+        if height_mm > 0:
+            foot = rectangle_corners(*params[:5])
+            for i in range(4):
+                a, b = foot[i], foot[(i + 1) % 4]
+                outward = np.array([b[1] - a[1], a[0] - b[0]])  # the footprint is counter-clockwise
+                if float(np.dot(self.nadir_mm - a, outward)) > 0:
+                    j = (i + 1) % 4
+                    polygons.append(pts[[i, j, 4 + j, 4 + i]])
+                    # Sides 0 and 2 run along the length: they face the part's y.
+                    kinds.append(SIDE_Y if i % 2 == 0 else SIDE_X)
+        return np.stack(polygons), np.array(kinds)
 
 
 def distances_to_outline(points: np.ndarray, outline: np.ndarray) -> np.ndarray:
@@ -64,3 +126,34 @@ def distances_to_outline(points: np.ndarray, outline: np.ndarray) -> np.ndarray:
     area2 = float(np.sum(a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1]))
     sign = np.where(cross * area2 > 0, -1.0, 1.0)
     return sign * dist[rows, k]
+
+
+def lengths_in_faces(windows: EdgeWindows, polygons: np.ndarray,
+                     stretches: tuple[tuple[float, float], ...]) -> list[np.ndarray]:
+    """Pixels of each window inside each face (N, F), for each stretch (from, to: px from the window's
+    inner end): the window's line clipped to each convex polygon (Cyrus-Beck)."""
+    a = polygons
+    nxt = a[:, _NEXT]
+    e = nxt - a  # (F, 4, 2)
+    area2 = np.sum(a[..., 0] * nxt[..., 1] - nxt[..., 0] * a[..., 1], axis=1)
+    # Outward normals whichever way round the projected polygon runs.
+    normal = np.stack([e[..., 1], -e[..., 0]], axis=-1) * np.sign(area2)[:, None, None]
+    q, d = windows.inner_norm, windows.step_norm
+    # Inside edge k where s * den <= num.
+    flat = normal.reshape(-1, 2).T  # (2, F*4)
+    num = (np.sum(normal * a, axis=-1).reshape(1, -1) - q @ flat).reshape(len(q), *normal.shape[:2])
+    den = (d @ flat).reshape(num.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = num / den
+    enter = np.where(den < 0, t, -np.inf).max(axis=2)
+    leave = np.where(den > 0, t, np.inf).min(axis=2)
+    outside = ((den == 0) & (num < 0)).any(axis=2) | (area2 == 0)[None, :]
+    out = []
+    for lo, hi in stretches:
+        length = np.minimum(leave, hi) - np.maximum(enter, lo)
+        out.append(np.where(outside, 0.0, np.maximum(length, 0.0)))
+    return out
+
+
+# Each polygon vertex's successor (4-gons).
+_NEXT = np.array([1, 2, 3, 0])

@@ -17,8 +17,8 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from tracker.box import BoxCamera
-from tracker.boxfit import fit_box
+from tracker.box import BoxCamera, EdgeWindows
+from tracker.boxfit import BoxFit, fit_box
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
 from tracker.split import SplitRule, split_blob
@@ -61,8 +61,9 @@ class Measurer:
         self._min_area_px = 0.5 * config.min_area_mm2 / mapper.max_mm_per_px() ** 2
         self._mm_per_px = mapper.calibration.mm_per_px_at_centre()
         self._box_camera = BoxCamera(mapper.calibration)
-        # A box outline that misses its edge points by more than this (px RMS) is no box.
-        self._max_rms_norm = config.box_max_rms_px / float(mapper.calibration.camera_matrix[0, 0])
+        # Parts are boxes with side faces (a height given or estimated), not flat rectangles.
+        self._boxes = config.part_height_mm > 0 or config.estimate_height
+        self._focal_px = float(mapper.calibration.camera_matrix[0, 0])
         self._split_rule = SplitRule(config.touch_min_notch_px, self._min_area_px)
 
     def __call__(self, frame: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> list[Measurement]:
@@ -101,20 +102,21 @@ class Measurer:
         hull_mm = self.mapper.to_mm(cv2.convexHull(contour).reshape(-1, 2))
         if cv2.contourArea(hull_mm.astype(np.float32)) < cfg.min_area_mm2:
             return None
-        points_px = None
+        edges = None
         height: tuple[float | None, float] = (None, math.inf)
         if cfg.subpixel and not clipped:
-            points_px = self._edge_points(frame, reference, contour, (x, y, w, h), others)
-        if points_px is None or len(points_px) < 12:
+            edges = self._edge_points(frame, reference, contour, (x, y, w, h), others)
+        if edges is None or len(edges.points_px) < 12:
             # Binary staircase: boundary pixel centres sit half a pixel inside the edge.
             points_px = contour.reshape(-1, 2).astype(np.float64)
             rect = min_area_rect(hull_mm)
         else:
-            norm, pts_mm = self.mapper.to_norm_and_mm(points_px)
+            points_px = edges.points_px
+            pts_mm = self.mapper.to_mm(points_px)
             rect = refine_rect(pts_mm, min_area_rect(pts_mm), band=cfg.side_band_px * self._mm_per_px)
-            if cfg.part_height_mm > 0 or cfg.estimate_height:
-                # A box: its side faces are part of the silhouette; fit the box's outline instead.
-                box = self._fit_box(norm, rect)
+            if self._boxes:
+                # A box: its side faces are part of the silhouette; fit the box to its edges instead.
+                box = self._fit_box(edges, rect)
                 if box is not None:
                     rect = box.rect
                     if cfg.estimate_height:
@@ -146,18 +148,20 @@ class Measurer:
             return None
         return blocked > 0
 
-    def _fit_box(self, norm: np.ndarray, rect: Rect):
+    def _fit_box(self, edges: _Edges, rect: Rect) -> BoxFit | None:
         cfg = self.config
         if not cfg.estimate_height:
-            return fit_box(self._box_camera, norm, rect, cfg.part_height_mm, self._max_rms_norm)
+            return fit_box(self._box_camera, *self._windows(edges), rect, cfg.part_height_mm, cfg.box_max_rms_px,
+                           self._focal_px)
         # The height is found from several starts: from a flat start the fit may stay flat (a
         # larger flat rectangle explains a box's silhouette almost as well).
-        fits = [fit_box(self._box_camera, norm, rect, h, self._max_rms_norm, free_height=True)
-                for h in cfg.height_starts_mm]
+        points, windows = self._windows(edges)
+        fits = [fit_box(self._box_camera, points, windows, rect, h, cfg.box_max_rms_px, self._focal_px,
+                        free_height=True) for h in cfg.height_starts_mm]
         fits = [f for f in fits if f is not None]
         return min(fits, key=lambda f: f.cost) if fits else None
 
-    def _edge_points(self, frame, reference, contour, bbox, blocked=None) -> np.ndarray | None:
+    def _edge_points(self, frame, reference, contour, bbox, blocked=None) -> _Edges | None:
         """Sub-pixel edge points (Nx2 px); ``blocked``: window pixels of other parts, which no edge's
         window may reach (there the next part is no belt)."""
         cfg = self.config
@@ -176,21 +180,47 @@ class Measurer:
         # Lighting gain of this frame against the reference, from the belt around the blob.
         gain = _median_u8(img8, belt) / max(_median_u8(cv2.convertScaleAbs(ref), belt), 1.0)
         belt_level = gain * ref
-        # Pixel = (1 - c) * belt + c * part: the part's own level is uniform, the belt's is
-        # not (shading), so the contrast is taken per pixel against the local reference.
+        # The part's level: uniform for a flat part; a box's side faces are shaded unlike its top,
+        # so there each edge is first read against the face next to it (a start for the box fit).
         part_level = _median_u8(img8, inner)
         inside = piece > 0
-        local = cfg.part_height_mm > 0 or cfg.estimate_height
         k = HALF_WINDOW_PX
-        rows = _boundary_crossings(img8, belt_level, part_level, inside, cfg.min_contrast, k, local, blocked)
-        cols = _boundary_crossings(img8.T, belt_level.T, part_level, inside.T, cfg.min_contrast, k, local,
-                                   None if blocked is None else blocked.T)
-        if rows is None or cols is None:
-            return None
-        points = np.concatenate([rows, cols[:, ::-1]])
+        rows = _boundary_crossings(img8, belt_level, inside, k, blocked)
+        cols = _boundary_crossings(img8.T, belt_level.T, inside.T, k, None if blocked is None else blocked.T)
+        levels = [c.face_levels(k) if self._boxes else part_level for c in (rows, cols)]
+        for c, level in zip((rows, cols), levels, strict=True):
+            if len(c.rows) and np.min(np.abs(np.reshape(level, (-1, 1)) - c.belt)) < cfg.min_contrast:
+                return None  # too little contrast to trust
+        points = np.concatenate([rows.points(levels[0]), cols.points(levels[1])[:, ::-1]])
         if len(points) == 0:
             return None
-        return points + [x0, y0]
+        return _Edges(points + [x0, y0], rows, cols, (x0, y0), tuple(levels))
+
+    def _windows(self, edges: _Edges) -> tuple[np.ndarray, EdgeWindows]:
+        """The edge points (normalised) and windows for the box fit, each window read against the face
+        next to its edge."""
+        inner_r, out_r = edges.rows.ends_px()
+        inner_c, out_c = edges.cols.ends_px()
+        inner = np.concatenate([inner_r, inner_c[:, ::-1]]) + edges.origin
+        outward = np.concatenate([out_r, out_c[:, ::-1]])
+        k = HALF_WINDOW_PX
+        n = len(inner)
+        norm = self.mapper.to_norm(np.concatenate([inner, inner + 2 * k * outward, edges.points_px]))
+        ends, points = norm[: 2 * n], norm[2 * n :]
+        covered = np.concatenate([edges.rows.covered(edges.levels[0]), edges.cols.covered(edges.levels[1])])
+        # The level pixel (see _Crossings.face_levels) is the window's (k+2)-th from its inner end.
+        return points, EdgeWindows(ends[:n], (ends[n:] - ends[:n]) / (2 * k), covered, 2.0 * k, (k - 2.0, k - 1.0))
+
+
+@dataclass(frozen=True)
+class _Edges:
+    """A blob's sub-pixel edge points and the windows they were read from."""
+
+    points_px: np.ndarray  # (N, 2) whole-frame pixels
+    rows: _Crossings
+    cols: _Crossings  # transposed: their "rows" are columns
+    origin: tuple[int, int]  # the examined window's first pixel (x0, y0)
+    levels: tuple  # the part's level each set of windows was read against (per window, or one)
 
 
 def _overlap(window: tuple[int, int, int, int], box: tuple[int, int, int, int]) -> bool:
@@ -211,18 +241,50 @@ def _median_u8(image: np.ndarray, mask: np.ndarray) -> float:
     return level - 0.5 + (half - below) / hist[level]
 
 
-def _boundary_crossings(img8: np.ndarray, belt: np.ndarray, part_level: float, inside: np.ndarray,
-                        min_contrast: float, half_window: int, local: bool = False,
-                        blocked: np.ndarray | None = None) -> np.ndarray | None:
-    """Sub-pixel edge positions where each row crosses the blob's outer boundary: Nx2 (col, row).
+@dataclass(frozen=True)
+class _Crossings:
+    """The windows across a blob's boundary along rows (or columns): pixel values and the belt under them."""
+
+    rows: np.ndarray  # (N,) the row of each window
+    first_col: np.ndarray  # (N,) its first column; it spans 2k pixels
+    rising: np.ndarray  # (N,) bool: the part lies on the window's high side (a left edge)
+    image: np.ndarray  # (N, 2k) grey levels
+    belt: np.ndarray  # (N, 2k) the belt's level under them
+
+    def points(self, level: np.ndarray | float) -> np.ndarray:
+        """Where the edge crosses each row (Nx2: col, row), the part's level given per window or once."""
+        cover = self.covered(level)
+        along = np.where(self.rising, self.image.shape[1] - cover, cover)
+        return np.column_stack([self.first_col - 0.5 + along, self.rows.astype(np.float64)])
+
+    def covered(self, level: np.ndarray | float) -> np.ndarray:
+        """Pixels of each window the part covers, in units of ``level``'s contrast (Pixel = (1 - c) *
+        belt + c * part); along a row the covered fractions add up to where the edge crosses it."""
+        return ((self.image - self.belt) / (np.reshape(level, (-1, 1)) - self.belt)).sum(axis=1)
+
+    def face_levels(self, half_window: int) -> np.ndarray:
+        """Each window's face next to the edge: the first pixel wholly inside, one past the boundary pixel."""
+        return np.where(self.rising, self.image[:, half_window + 1], self.image[:, half_window - 2])
+
+    def ends_px(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each window's inner end (Nx2: col, row, pixel coordinates of this orientation) and its
+        outward direction (a unit step along the row)."""
+        span = self.image.shape[1]
+        col = np.where(self.rising, self.first_col + span - 0.5, self.first_col - 0.5)
+        outward = np.where(self.rising, -1.0, 1.0)
+        return (np.column_stack([col, self.rows.astype(np.float64)]),
+                np.column_stack([outward, np.zeros(len(col))]))
+
+
+def _boundary_crossings(img8: np.ndarray, belt: np.ndarray, inside: np.ndarray, half_window: int,
+                        blocked: np.ndarray | None = None) -> _Crossings:
+    """The windows where each row crosses the blob's outer boundary.
 
     The window of each crossing starts at the blob's first (last) pixel of the row and
     reaches ``half_window`` pixels to either side. Only rows where the boundary is within
     ~63 deg of vertical are used (the window then holds the whole transition); the
-    transposed call takes the other edges. None when the contrast is too low to trust.
-    ``local``: the part's level is read just inside each crossing instead of ``part_level``
-    (a box's side faces are shaded unlike its top, and they bound the silhouette too).
-    ``blocked``: pixels no window may reach (another part touching this one).
+    transposed call takes the other edges. ``blocked``: pixels no window may reach (another
+    part touching this one).
     """
     k = half_window
     n_rows, n_cols = inside.shape
@@ -247,16 +309,9 @@ def _boundary_crossings(img8: np.ndarray, belt: np.ndarray, part_level: float, i
         if blocked is not None:
             free = ~blocked[rr[:, None], cols].any(axis=1)
             rr, cols = rr[free], cols[free]
-        if not len(rr):
-            continue
-        belt_w = belt[rr[:, None], cols]
-        # The face next to the edge: the first pixel wholly inside, one past the boundary pixel.
-        level = img8[rr, cols[:, k + 1] if rising else cols[:, k - 2]][:, None] if local else part_level
-        contrast = level - belt_w
-        if np.min(np.abs(contrast)) < min_contrast:
-            return None
-        cover = (img8[rr[:, None], cols] - belt_w) / contrast
-        # Along the row the covered fractions add up to where the edge crosses it.
-        length = (1.0 - cover).sum(axis=1) if rising else cover.sum(axis=1)
-        out.append(np.column_stack([cols[:, 0] - 0.5 + length, rr.astype(np.float64)]))
-    return np.concatenate(out) if out else np.zeros((0, 2))
+        out.append((rr, cols[:, 0], np.full(len(rr), rising), img8[rr[:, None], cols].astype(np.float64),
+                    belt[rr[:, None], cols].astype(np.float64)))
+    parts = [np.concatenate(a) for a in zip(*out, strict=True)]
+    parts[-2] = parts[-2].reshape(-1, 2 * k)
+    parts[-1] = parts[-1].reshape(-1, 2 * k)
+    return _Crossings(*parts)

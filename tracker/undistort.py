@@ -35,23 +35,18 @@ class BeltMapper:
         self.spent_ns = 0
 
     def to_mm(self, points_px: np.ndarray) -> np.ndarray:
+        norm = self.to_norm(points_px)
+        return apply_homography(self._h_norm, norm) if len(norm) else np.zeros((0, 2))
+
+    def to_norm(self, points_px: np.ndarray) -> np.ndarray:
+        """Undistorted normalised coordinates (x/z, y/z) of distorted pixels (Nx2)."""
         t0 = time.perf_counter_ns()
         pts = np.asarray(points_px, dtype=np.float64).reshape(-1, 1, 2)
         if pts.shape[0] == 0:
             return np.zeros((0, 2))
-        norm = cv2.undistortPoints(pts, self._k, self._d, criteria=POINT_CRITERIA)
-        mm = apply_homography(self._h_norm, norm.reshape(-1, 2))
-        self.spent_ns += time.perf_counter_ns() - t0
-        return mm
-
-    def to_norm_and_mm(self, points_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Undistorted normalised coordinates (x/z, y/z) and the plane's mm of the same points."""
-        t0 = time.perf_counter_ns()
-        pts = np.asarray(points_px, dtype=np.float64).reshape(-1, 1, 2)
         norm = cv2.undistortPoints(pts, self._k, self._d, criteria=POINT_CRITERIA).reshape(-1, 2)
-        mm = apply_homography(self._h_norm, norm)
         self.spent_ns += time.perf_counter_ns() - t0
-        return norm, mm
+        return norm
 
     def view_outline_mm(self, step_px: int = 8) -> np.ndarray:
         """The image border mapped onto the plane: the polygon of belt the camera sees."""
