@@ -24,7 +24,6 @@ import cv2
 import numpy as np
 
 from tracker.calibration import Calibration
-from tracker.geometry import rectangle_corners
 
 # Face kinds: the top, the sides facing the part's own x (its ends) and those facing its y.
 TOP, SIDE_X, SIDE_Y = 0, 1, 2
@@ -75,13 +74,15 @@ class BoxCamera:
 
     def corners(self, params: np.ndarray, height_mm: float) -> np.ndarray:
         """The 8 corners' normalised images: footprint first (counter-clockwise), then the top face."""
-        x, y, angle, length, width = params[:5]
-        foot = rectangle_corners(x, y, angle, length, width)
-        world = np.zeros((8, 3))
-        world[:4, :2] = foot
-        world[4:, :2] = foot
-        world[4:, 2] = -height_mm
-        return self.project(world)
+        return self._corner_images(np.array([[*params[:5], height_mm]]))[0]
+
+    def _corner_images(self, params: np.ndarray) -> np.ndarray:
+        """The 8 corners' images of each box (P rows of x, y, angle, length, width, height): (P, 8, 2)."""
+        world = np.zeros((len(params), 8, 3))
+        world[:, :4, :2] = world[:, 4:, :2] = _footprints(params)
+        world[:, 4:, 2] = -params[:, 5:6]
+        cam = world @ self.rotation.T + self.translation
+        return cam[..., :2] / cam[..., 2:3]
 
     def outline(self, params: np.ndarray, height_mm: float) -> np.ndarray:
         """The silhouette polygon (Kx2, normalised coordinates)."""
@@ -92,21 +93,33 @@ class BoxCamera:
         index = cv2.convexHull(pts.astype(np.float32).reshape(-1, 1, 2), returnPoints=False)
         return pts[index.reshape(-1)]
 
-    def faces(self, params: np.ndarray, height_mm: float) -> tuple[np.ndarray, np.ndarray]:
-        """The faces the camera sees: polygons (F, 4, 2) in normalised coordinates and their kinds (F,)."""
-        pts = self.corners(params, height_mm)
-        polygons, kinds = [pts[4:]], [TOP]
-        if height_mm > 0:
-            foot = rectangle_corners(*params[:5])
+    def faces(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The faces the camera sees of each box (P rows of x, y, angle, length, width, height): their
+        polygons (P, F, 4, 2) in normalised coordinates and kinds (F,). Which faces are seen is decided
+        on the first box (the others are its small variations: a Jacobian's)."""
+        params = np.atleast_2d(params)
+        pts = self._corner_images(params)
+        faces, kinds = [[4, 5, 6, 7]], [TOP]
+        if params[0, 5] > 0:
+            foot = _footprints(params[:1])[0]
             for i in range(4):
                 a, b = foot[i], foot[(i + 1) % 4]
                 outward = np.array([b[1] - a[1], a[0] - b[0]])  # the footprint is counter-clockwise
                 if float(np.dot(self.nadir_mm - a, outward)) > 0:
                     j = (i + 1) % 4
-                    polygons.append(pts[[i, j, 4 + j, 4 + i]])
+                    faces.append([i, j, 4 + j, 4 + i])
                     # Sides 0 and 2 run along the length: they face the part's y.
                     kinds.append(SIDE_Y if i % 2 == 0 else SIDE_X)
-        return np.stack(polygons), np.array(kinds)
+        return pts[:, np.array(faces)], np.array(kinds)
+
+
+def _footprints(params: np.ndarray) -> np.ndarray:
+    """rectangle_corners of each row's (x, y, angle, length, width): (P, 4, 2), counter-clockwise."""
+    a = np.radians(params[:, 2])
+    u = np.stack([np.cos(a), np.sin(a)], axis=1) * params[:, 3:4] / 2
+    v = np.stack([-np.sin(a), np.cos(a)], axis=1) * params[:, 4:5] / 2
+    c = params[:, None, :2]
+    return np.stack([c[:, 0] - u - v, c[:, 0] + u - v, c[:, 0] + u + v, c[:, 0] - u + v], axis=1)
 
 
 def distances_to_outline(points: np.ndarray, outline: np.ndarray) -> np.ndarray:
@@ -128,31 +141,39 @@ def distances_to_outline(points: np.ndarray, outline: np.ndarray) -> np.ndarray:
     return sign * dist[rows, k]
 
 
-def lengths_in_faces(windows: EdgeWindows, polygons: np.ndarray,
-                     stretches: tuple[tuple[float, float], ...]) -> list[np.ndarray]:
-    """Pixels of each window inside each face (N, F), for each stretch (from, to: px from the window's
-    inner end): the window's line clipped to each convex polygon (Cyrus-Beck)."""
+def lengths_in_faces(windows: EdgeWindows, polygons: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels of each window inside each face, for each box's polygons (P, F, 4, 2): over the whole
+    window, and over its level pixel (``level_px``), each (P, N, F). A window's line is clipped to each
+    convex polygon (Cyrus-Beck); the level pixel's share is its area's, read along two lines across
+    its height (Gauss's points: exact for a share linear along the height, where an edge leaves the
+    pixel sideways)."""
+    n_box, n_face = polygons.shape[:2]
     a = polygons
-    nxt = a[:, _NEXT]
-    e = nxt - a  # (F, 4, 2)
-    area2 = np.sum(a[..., 0] * nxt[..., 1] - nxt[..., 0] * a[..., 1], axis=1)
-    # Outward normals whichever way round the projected polygon runs.
-    normal = np.stack([e[..., 1], -e[..., 0]], axis=-1) * np.sign(area2)[:, None, None]
+    nxt = a[:, :, _NEXT]
+    e = nxt - a  # (P, F, 4, 2)
+    area2 = np.sum(a[..., 0] * nxt[..., 1] - nxt[..., 0] * a[..., 1], axis=2)  # (P, F)
+    # Outward normals whichever way round the projected polygon runs (none for a face seen edge-on).
+    normal = (np.stack([e[..., 1], -e[..., 0]], axis=-1) * np.sign(area2)[..., None, None]).reshape(-1, 2)
     q, d = windows.inner_norm, windows.step_norm
-    # Inside edge k where s * den <= num.
-    flat = normal.reshape(-1, 2).T  # (2, F*4)
-    num = (np.sum(normal * a, axis=-1).reshape(1, -1) - q @ flat).reshape(len(q), *normal.shape[:2])
-    den = (d @ flat).reshape(num.shape)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = num / den
-    enter = np.where(den < 0, t, -np.inf).max(axis=2)
-    leave = np.where(den > 0, t, np.inf).min(axis=2)
-    outside = ((den == 0) & (num < 0)).any(axis=2) | (area2 == 0)[None, :]
-    out = []
-    for lo, hi in stretches:
-        length = np.minimum(leave, hi) - np.maximum(enter, lo)
-        out.append(np.where(outside, 0.0, np.maximum(length, 0.0)))
-    return out
+    # Inside edge k where s * den <= num; columns: every box's every face's every edge.
+    num = np.sum(normal * a.reshape(-1, 2), axis=1) - q @ normal.T  # (N, P*F*4)
+    den = d @ normal.T
+    # A line parallel to an edge: inside all along or nowhere, as a tiny step along it says.
+    den[den == 0] = 1e-300
+    # Across the row: a pixel's height, the lens taken as locally conformal.
+    across = np.stack([-d[:, 1], d[:, 0]], axis=1) @ normal.T
+
+    def clipped(num: np.ndarray, lo: float, hi: float) -> np.ndarray:
+        t = (num / den).reshape(len(q), n_box * n_face, 4)
+        enter = np.where(den.reshape(t.shape) < 0, t, -np.inf).max(axis=2)
+        leave = np.where(den.reshape(t.shape) > 0, t, np.inf).min(axis=2)
+        length = np.maximum(np.minimum(leave, hi) - np.maximum(enter, lo), 0.0)
+        return length.reshape(len(q), n_box, n_face).transpose(1, 0, 2)
+
+    lo, hi = windows.level_px
+    gauss = 0.5 / np.sqrt(3.0)
+    level = 0.5 * (clipped(num - gauss * across, lo, hi) + clipped(num + gauss * across, lo, hi))
+    return clipped(num, 0.0, windows.span_px), level
 
 
 # Each polygon vertex's successor (4-gons).

@@ -1,12 +1,14 @@
 """Fitting a box's footprint to the coverage sums across its silhouette's edges (tracker/box.py).
 
-Levenberg-Marquardt on the footprint (x, y, angle, length, width), optionally the height, and
-the two side shades (a side face's contrast as a fraction of the top's: one for the faces at the
-part's ends, one for those along it). Each window's residual is its measured coverage sum minus
-the box's prediction (each face's pixels in it times its shade, over the shade of the pixel the
-sum was read against), in pixels. The geometric columns of the Jacobian are taken numerically, the shades' exactly (the
-sums are linear in them). A fit that does not explain the sums (a part that is no prism: a bag)
-is rejected, and the caller keeps the plain rectangle.
+Levenberg-Marquardt on the footprint (x, y, angle, length, width), optionally the height. Each
+window's residual is its measured coverage sum minus the box's prediction (each face's pixels in
+it times its shade, over the shade of the pixel the sum was read against), in pixels. The two side
+shades (a side face's contrast as a fraction of the top's: one for the faces at the part's ends,
+one for those along it) are solved for every box pose tried (variable projection: they are nearly
+linear, and left free beside the pose they open long curved valleys that stop the fit short). The
+box is first brought near with its plain outline against the edge points. A fit that does not
+explain the data (a part that is no prism: a bag) is rejected, and the caller keeps the plain
+rectangle.
 """
 
 from __future__ import annotations
@@ -19,16 +21,23 @@ import numpy as np
 from tracker.box import BoxCamera, EdgeWindows, distances_to_outline, lengths_in_faces
 from tracker.geometry import Rect, wrap_angle_deg
 
-# Parameters: x, y (mm), angle (deg), length, width, height (mm), the two side shades.
-_H, _SHADES = 5, (6, 7)
-# Finite-difference steps: mm, the angle in degrees, the shades as fractions.
-_STEP = np.array([0.01, 0.01, 0.005, 0.01, 0.01, 0.01, 0.001, 0.001])
-_ITERATIONS = 6
+# Parameters: x, y (mm), angle (deg), length, width, height (mm).
+_H = 5
+# Finite-difference steps: mm, the angle in degrees.
+_STEP = np.array([0.01, 0.01, 0.005, 0.01, 0.01, 0.01])
+# Iterations of each stage: the outline's from the start rectangle, the sums' from the outline's result.
+_OUTLINE_ITERATIONS, _SUM_ITERATIONS = 20, 5
 # Converged once no parameter moves by more than this fraction of its difference step.
 _CONVERGED = 0.05
-# Where the fit starts the side shades, and how weakly it holds them there (a pseudo-residual in
-# px per unit of shade): a side face too narrow to show its shade leaves the shade undecided.
+# The side shades' prior, and how weakly it holds them (px of residual per unit of shade): a side
+# face too narrow to show its shade leaves the shade undecided.
 _SHADE_START, _SHADE_PRIOR = 0.5, 0.02
+# The shades a side may have: from nearly the belt's level (a window read against a side face as
+# dark as the belt has no contrast to read; the measurement refuses those) to half again the top's
+# contrast. A fit that would need others is wandering in a flat valley.
+_SHADE_RANGE = (0.1, 1.5)
+# Reweighting rounds of the shades' solution (their sums are ratios, linear once the level is fixed).
+_SHADE_ROUNDS = 3
 # The least level (a fraction of the top's) a window's level pixel is taken to have.
 _MIN_LEVEL = 0.05
 # Windows whose residual exceeds this many median residuals are outliers (a corner, a speck).
@@ -44,36 +53,99 @@ class BoxFit:
     # Sum of squared residuals (px^2): lower is the better of two fits.
     cost: float = 0.0
     rms_px: float = 0.0
+    # How well this view alone decides the footprint's size: the covariance of (length, width) (mm^2).
+    # A thin side face's shade trades with the edge next to it: there one side of the footprint is
+    # poorly placed and the size uncertain, and a size known from other views (size_prior) places it.
+    size_cov_mm2: np.ndarray | None = None
 
 
-def predicted_sums(camera: BoxCamera, windows: EdgeWindows, params: np.ndarray) -> np.ndarray:
-    """The coverage sum the box ``params`` predicts for each window (px)."""
-    polygons, kinds = camera.faces(params[:5], params[_H])
-    shade = np.array([1.0, params[_SHADES[0]], params[_SHADES[1]]])[kinds]
-    total, level = lengths_in_faces(windows, polygons, ((0.0, windows.span_px), windows.level_px))
+@dataclass(frozen=True)
+class SizePrior:
+    """A part's size as known from other views (a track's): length >= width, 1-sigma each (mm)."""
+
+    length_mm: float
+    width_mm: float
+    length_sigma_mm: float
+    width_sigma_mm: float
+
+    def __post_init__(self) -> None:
+        if not (self.length_mm >= self.width_mm > 0 and self.length_sigma_mm > 0 and self.width_sigma_mm > 0):
+            raise ValueError(f"size prior: expected length >= width > 0 and sigmas > 0, got {self}")
+
+
+def predicted_sums(camera: BoxCamera, windows: EdgeWindows, params: np.ndarray,
+                   shades: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The coverage sums each box (P rows of ``params``) predicts for ``windows`` (P, N; px) with the
+    side ``shades`` (end faces, long faces), or with the shades that explain the sums best (None);
+    and the shades (P, 2)."""
+    polygons, kinds = camera.faces(params)
+    onehot = np.eye(3)[kinds]  # face -> kind
+    total, level = (lengths @ onehot for lengths in lengths_in_faces(windows, polygons))
+    if shades is None:
+        shades = _best_shades(total, level, windows.covered_px)
+    s = np.concatenate([np.ones((len(total), 1)), np.broadcast_to(shades, (len(total), 2))], axis=1)
     # The level pixel outside the part (a window across a corner) is an outlier, not a division by 0.
-    return (total @ shade) / np.maximum(level @ shade, _MIN_LEVEL)
+    predicted = np.einsum("pnk,pk->pn", total, s) / np.maximum(np.einsum("pnk,pk->pn", level, s), _MIN_LEVEL)
+    return predicted, np.broadcast_to(shades, (len(total), 2))
 
 
-def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, start: Rect, height_mm: float,
-            max_rms_px: float, px_per_norm: float, free_height: bool = False) -> BoxFit | None:
+def _best_shades(total: np.ndarray, level: np.ndarray, covered: np.ndarray) -> np.ndarray:
+    """The side shades that best explain the sums (P, 2), given each kind's pixels in each window
+    (P, N, 3) and in its level pixel: covered * (level . s) = total . s is linear in the shades s,
+    and reweighted by the level it implies it is the residual itself."""
+    shades = np.full((len(total), 2), _SHADE_START)
+    prior = _SHADE_PRIOR**2 * np.eye(2)
+    for _ in range(_SHADE_ROUNDS):
+        weight = 1.0 / np.maximum(level[..., 0] + np.einsum("pnk,pk->pn", level[..., 1:], shades), _MIN_LEVEL)
+        a = (covered[None, :, None] * level[..., 1:] - total[..., 1:]) * weight[..., None]
+        b = (total[..., 0] - covered[None] * level[..., 0]) * weight
+        normal = np.einsum("pnk,pnj->pkj", a, a) + prior
+        rhs = np.einsum("pnk,pn->pk", a, b) + prior @ np.full(2, _SHADE_START)
+        shades = np.clip(np.linalg.solve(normal, rhs[..., None])[..., 0], *_SHADE_RANGE)
+    return shades
+
+
+def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows | None, start: Rect,
+            height_mm: float, max_rms_px: float, px_per_norm: float, free_height: bool = False,
+            size_prior: SizePrior | None = None, sum_sigma_px: float = 0.1) -> BoxFit | None:
     """The footprint (and with ``free_height`` the height, from ``height_mm`` on) whose box best
     explains ``windows``, or None when the fit's RMS residual exceeds ``max_rms_px``. ``points_norm``:
-    the edge points (Nx2, normalised) that bring the box near first; ``px_per_norm``: the focal length."""
+    the edge points (Nx2, normalised) that bring the box near first, and all there is to fit without
+    ``windows``; ``px_per_norm``: the focal length. ``size_prior``: the size known from other views,
+    weighed against the sums as if each had noise ``sum_sigma_px``."""
     free = [0, 1, 2, 3, 4, *([_H] if free_height else [])]
-    params = np.array([start.x_mm, start.y_mm, start.angle_deg, start.length_mm, start.width_mm, height_mm,
-                       _SHADE_START, _SHADE_START], dtype=np.float64)
+    params = np.array([start.x_mm, start.y_mm, start.angle_deg, start.length_mm, start.width_mm, height_mm])
 
+    # Each takes boxes (P rows of parameters) and gives their residuals (P, N) over the rows ``which``.
     def outline(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
-        return px_per_norm * distances_to_outline(points_norm[which], camera.outline(p[:5], p[_H]))
+        return np.stack([px_per_norm * distances_to_outline(points_norm[which], camera.outline(b[:5], b[_H]))
+                         for b in p])
 
-    def sums(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
+    def sums(p: np.ndarray, which: np.ndarray | slice = slice(None), shades: np.ndarray | None = None) -> np.ndarray:
         w = windows if isinstance(which, slice) else windows.subset(which)
-        return w.covered_px - predicted_sums(camera, w, p)
+        return w.covered_px - predicted_sums(camera, w, p, shades)[0]
 
-    params, r, jac = _robust(outline, params, free)
-    params, r, jac = _robust(sums, params, [*free, *_SHADES])
+    def middling(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
+        return sums(p, which, np.full(2, _SHADE_START))
+
+    params, r, jac, _ = _robust(outline, params, free, _OUTLINE_ITERATIONS)
+    size_cov = None
+    if windows is not None:
+        prior = None
+        if size_prior is not None:
+            # Start the sums' fit at the known size too: in a flat valley it need not travel far.
+            order = [3, 4] if params[3] >= params[4] else [4, 3]
+            known = np.array([size_prior.length_mm, size_prior.width_mm])
+            params[order] = known
+            prior = (order, known, sum_sigma_px / np.array([size_prior.length_sigma_mm, size_prior.width_sigma_mm]))
+        # The outline's edge points lie inside a thin side face's outer edge by (1 - its shade) times its
+        # width: from there a fit of the shades finds them near the top's shade, and the edge where
+        # the outline put it. Middling shades first bring the box to the middle of that valley.
+        params, r, jac, keep = _robust(middling, params, free, _SUM_ITERATIONS, prior)
+        params, r, jac = _least_squares(lambda p: sums(p, keep), params, free, _SUM_ITERATIONS, prior)
     rms = float(np.sqrt(np.mean(r**2))) if len(r) else math.inf
+    if windows is not None and len(r) > len(free):
+        size_cov = _size_covariance(jac, free, rms)
     if not np.isfinite(params).all() or rms > max_rms_px or min(params[3], params[4]) <= 0:
         return None
     sigma_h = math.inf
@@ -86,57 +158,65 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     x, y, angle, length, width, h = params[: _H + 1]
     if width > length:
         length, width, angle = width, length, angle + 90.0
+        size_cov = None if size_cov is None else size_cov[::-1, ::-1]
     rect = Rect(float(x), float(y), wrap_angle_deg(float(angle)), float(length), float(width))
-    return BoxFit(rect, float(h), sigma_h, float(np.sum(r**2)), rms)
+    return BoxFit(rect, float(h), sigma_h, float(np.sum(r**2)), rms, size_cov)
 
 
-def _robust(residuals, params: np.ndarray, free: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _size_covariance(jac: np.ndarray, free: list[int], rms: float) -> np.ndarray:
+    """The covariance of (length, width) from the windows alone (the prior left out, the shades
+    projected out), scaled by the residuals' spread."""
+    size = [free.index(i) for i in (3, 4)]
+    return (np.linalg.pinv(jac.T @ jac) * rms**2)[np.ix_(size, size)]
+
+
+def _robust(residuals, params: np.ndarray, free: list[int], iterations: int,
+            prior: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | slice]:
     """Least squares, then again without the outliers (a corner's windows, a speck). They are
     judged only once the box is near: judged earlier, a side still far off would be dropped whole
-    and left free to drift. ``residuals(params, which)``: the residuals (px) of the rows ``which``."""
-    params, r, jac = _least_squares(residuals, params, free)
+    and left free to drift. ``residuals(params, which)``: the residuals (px) of the rows ``which``;
+    ``prior``: see _least_squares. Returns the last's params, residuals and Jacobian, and the rows kept."""
+    params, r, jac = _least_squares(residuals, params, free, iterations, prior)
     keep = np.abs(r) <= _OUTLIER_FACTOR * max(float(np.median(np.abs(r))), 1e-3)
     if keep.all():
-        return params, r, jac
-    return _least_squares(lambda p: residuals(p, keep), params, free)
+        return params, r, jac, slice(None)
+    return (*_least_squares(lambda p: residuals(p, keep), params, free, iterations, prior), keep)
 
 
-def _least_squares(residuals, params: np.ndarray, free: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Levenberg-Marquardt from ``params`` over the ``free`` ones: (params, residuals, Jacobian)."""
+def _least_squares(residuals, params: np.ndarray, free: list[int], iterations: int,
+                   prior: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Levenberg-Marquardt from ``params`` over the ``free`` ones: (params, residuals, Jacobian of the
+    residuals). ``residuals`` takes boxes (P rows) at once: the Jacobian's differences are one call.
+    ``prior``: (indices, values, weights), rows weight * (param - value) beside them."""
+    index, value, weight = prior if prior is not None else ([], np.zeros(0), np.zeros(0))
+    prior_jac = np.zeros((len(index), len(free)))
+    for row, i in enumerate(index):
+        prior_jac[row, free.index(i)] = weight[row]
+    steps = np.zeros((len(free), len(params)))
+    steps[np.arange(len(free)), free] = _STEP[free]
 
     def cost_of(r: np.ndarray, p: np.ndarray) -> float:
-        return float(np.sum(r**2) + _SHADE_PRIOR**2 * np.sum((p[list(_SHADES)] - _SHADE_START) ** 2))
+        return float(np.sum(r**2) + np.sum((weight * (p[index] - value)) ** 2))
 
-    # The shades' weak prior enters as two more rows.
-    prior = np.zeros((2, len(free)))
-    for row, i in enumerate(_SHADES):
-        if i in free:
-            prior[row, free.index(i)] = _SHADE_PRIOR
     damping = 1e-3
-    r = residuals(params)
+    r = residuals(params[None])[0]
     cost = cost_of(r, params)
     jac = np.zeros((len(r), len(free)))
-    for _ in range(_ITERATIONS):
-        for c, i in enumerate(free):
-            step = np.zeros_like(params)
-            step[i] = _STEP[i]
-            jac[:, c] = (residuals(params + step) - r) / _STEP[i]
-        a = np.vstack([jac, prior])
-        b = np.concatenate([r, _SHADE_PRIOR * (params[list(_SHADES)] - _SHADE_START)])
+    for _ in range(iterations):
+        jac = ((residuals(params + steps) - r) / _STEP[free][:, None]).T
+        a = np.vstack([jac, prior_jac])
+        b = np.concatenate([r, weight * (params[index] - value)])
         normal = a.T @ a
         delta = np.zeros_like(params)
         delta[free] = np.linalg.solve(normal + damping * np.diag(np.diag(normal) + 1e-12), -a.T @ b)
         trial = params + delta
         trial[_H] = max(trial[_H], 0.0)  # a part's top is above the belt
-        r_trial = residuals(trial)
+        r_trial = residuals(trial[None])[0]
         trial_cost = cost_of(r_trial, trial)
         if trial_cost < cost:
             params, r, cost, damping = trial, r_trial, trial_cost, damping * 0.3
-            # The shades are free to wander in the flat directions: only the box decides.
-            if np.all(np.abs(delta[: _H + 1]) < _STEP[: _H + 1] * _CONVERGED):
+            if np.all(np.abs(delta) < _STEP * _CONVERGED):
                 break
         else:
             damping *= 10.0
     return params, r, jac
-
-

@@ -112,13 +112,19 @@ class MeasureConfig:
     # With a part height: a box outline fitting its edge points worse than this (px RMS) means
     # the part is no box (a cylinder lying down, a bag); its top-face rectangle is kept instead.
     box_max_rms_px: float = 1.0
+    # A box's coverage sums scatter by about this much (px, 1 sigma): it weighs a size known from a
+    # track's other views against the sums of one view, where a thin side face leaves the size open.
+    sum_sigma_px: float = 0.1
+    # Parts whose sides differ by less than this (mm) are near square: which side is the length is
+    # not told apart, so no known size is lent to their fit.
+    square_mm: float = 1.0
     # Touching parts. A box's silhouette is convex: a notch this deep (px) in a blob's outline is
     # where two parts meet (a single part's pixel staircase and blur leave notches of about 1 px).
     touch_min_notch_px: float = 3.0
 
     def __post_init__(self) -> None:
         _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "box_max_rms_px",
-                  "touch_min_notch_px")
+                  "touch_min_notch_px", "sum_sigma_px", "square_mm")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
         try:
@@ -138,6 +144,8 @@ class TrackConfig:
     position_sigma_mm: float = 0.08
     angle_sigma_deg: float = 0.1
     size_sigma_mm: float = 0.1
+    # The least uncertainty (1 sigma, mm) a track's size is lent to a box's fit with (see measure.sum_sigma_px).
+    known_size_sigma_mm: float = 0.02
     # Process noise: how hard parts may accelerate / turn / change apparent size.
     accel_sigma_mm_s2: float = 2000.0
     angular_accel_sigma_deg_s2: float = 200.0

@@ -12,13 +12,14 @@ rectangle is still a rectangle.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
 
 from tracker.box import BoxCamera, EdgeWindows
-from tracker.boxfit import BoxFit, fit_box
+from tracker.boxfit import BoxFit, SizePrior, fit_box
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
 from tracker.split import SplitRule, split_blob
@@ -50,6 +51,9 @@ class Measurement:
     pickable: bool = True
     # Cut from a blob of touching parts.
     piece: bool = False
+    # A box's fit: how well this view alone decides the size (covariance of length and width, mm^2,
+    # see BoxFit); None where the size is as sure as any.
+    size_cov_mm2: np.ndarray | None = field(default=None, compare=False)
 
 
 class Measurer:
@@ -65,9 +69,13 @@ class Measurer:
         self._boxes = config.part_height_mm > 0 or config.estimate_height
         self._focal_px = float(mapper.calibration.camera_matrix[0, 0])
         self._split_rule = SplitRule(config.touch_min_notch_px, self._min_area_px)
+        self._known: Sequence[KnownPart] = ()
 
-    def __call__(self, frame: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> list[Measurement]:
-        """Measure every blob of ``mask``; ``reference`` is the empty belt (float32 or uint8)."""
+    def __call__(self, frame: np.ndarray, reference: np.ndarray, mask: np.ndarray,
+                 known: Sequence[KnownPart] = ()) -> list[Measurement]:
+        """Measure every blob of ``mask``; ``reference`` is the empty belt (float32 or uint8); ``known``:
+        the parts tracked so far, where they are expected now and their sizes (boxes use them)."""
+        self._known = known
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         contours = [c for c in contours if cv2.contourArea(c) >= self._min_area_px]
         boxes = [cv2.boundingRect(c) for c in contours]
@@ -102,7 +110,7 @@ class Measurer:
         hull_mm = self.mapper.to_mm(cv2.convexHull(contour).reshape(-1, 2))
         if cv2.contourArea(hull_mm.astype(np.float32)) < cfg.min_area_mm2:
             return None
-        edges = None
+        edges = box = None
         height: tuple[float | None, float] = (None, math.inf)
         if cfg.subpixel and not clipped:
             edges = self._edge_points(frame, reference, contour, (x, y, w, h), others)
@@ -124,7 +132,16 @@ class Measurer:
         centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
         # Another part within reach of its edges touches it, or nearly: not a pick (contract 4b).
         return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px), *height,
-                           pickable=others is None, piece=piece)
+                           pickable=others is None, piece=piece,
+                           size_cov_mm2=None if box is None else box.size_cov_mm2)
+
+    def _size_prior(self, rect: Rect) -> SizePrior | None:
+        """The size of the known part whose expected centre lies within this blob's rectangle's width."""
+        near = [(math.dist((k.x_mm, k.y_mm), (rect.x_mm, rect.y_mm)), k.size) for k in self._known]
+        near = [(d, size) for d, size in near if d < rect.width_mm / 2]
+        # A near-square part's sides may be taken the other way round: no prior then.
+        return next((size for _, size in sorted(near, key=lambda n: n[0])
+                     if size.length_mm - size.width_mm > self.config.square_mm), None)
 
     def _window(self, bbox) -> tuple[int, int, int, int]:
         """The pixels examined for a blob's edges: its bounding box and a margin (x0, y0, x1, y1)."""
@@ -151,12 +168,14 @@ class Measurer:
     def _fit_box(self, edges: _Edges, rect: Rect) -> BoxFit | None:
         cfg = self.config
         if not cfg.estimate_height:
-            return fit_box(self._box_camera, *self._windows(edges), rect, cfg.part_height_mm, cfg.box_max_rms_px,
-                           self._focal_px)
+            return fit_box(self._box_camera, self.mapper.to_norm(edges.points_px), self._windows(edges), rect,
+                           cfg.part_height_mm, cfg.box_max_rms_px, self._focal_px,
+                           size_prior=self._size_prior(rect), sum_sigma_px=cfg.sum_sigma_px)
         # The height is found from several starts: from a flat start the fit may stay flat (a
-        # larger flat rectangle explains a box's silhouette almost as well).
-        points, windows = self._windows(edges)
-        fits = [fit_box(self._box_camera, points, windows, rect, h, cfg.box_max_rms_px, self._focal_px,
+        # larger flat rectangle explains a box's silhouette almost as well). Only the outline is
+        # fitted: a thin side face's shade and its width (so the height) trade off in the sums.
+        points = self.mapper.to_norm(edges.points_px)
+        fits = [fit_box(self._box_camera, points, None, rect, h, cfg.box_max_rms_px, self._focal_px,
                         free_height=True) for h in cfg.height_starts_mm]
         fits = [f for f in fits if f is not None]
         return min(fits, key=lambda f: f.cost) if fits else None
@@ -196,20 +215,27 @@ class Measurer:
             return None
         return _Edges(points + [x0, y0], rows, cols, (x0, y0), tuple(levels))
 
-    def _windows(self, edges: _Edges) -> tuple[np.ndarray, EdgeWindows]:
-        """The edge points (normalised) and windows for the box fit, each window read against the face
-        next to its edge."""
+    def _windows(self, edges: _Edges) -> EdgeWindows:
+        """The edge windows for the box fit, each read against the face next to its edge."""
         inner_r, out_r = edges.rows.ends_px()
         inner_c, out_c = edges.cols.ends_px()
         inner = np.concatenate([inner_r, inner_c[:, ::-1]]) + edges.origin
         outward = np.concatenate([out_r, out_c[:, ::-1]])
         k = HALF_WINDOW_PX
         n = len(inner)
-        norm = self.mapper.to_norm(np.concatenate([inner, inner + 2 * k * outward, edges.points_px]))
-        ends, points = norm[: 2 * n], norm[2 * n :]
+        ends = self.mapper.to_norm(np.concatenate([inner, inner + 2 * k * outward]))
         covered = np.concatenate([edges.rows.covered(edges.levels[0]), edges.cols.covered(edges.levels[1])])
         # The level pixel (see _Crossings.face_levels) is the window's (k+2)-th from its inner end.
-        return points, EdgeWindows(ends[:n], (ends[n:] - ends[:n]) / (2 * k), covered, 2.0 * k, (k - 2.0, k - 1.0))
+        return EdgeWindows(ends[:n], (ends[n:] - ends[:n]) / (2 * k), covered, 2.0 * k, (k - 2.0, k - 1.0))
+
+
+@dataclass(frozen=True)
+class KnownPart:
+    """A part tracked so far: where its centre is expected in this frame (belt mm) and its size."""
+
+    x_mm: float
+    y_mm: float
+    size: SizePrior
 
 
 @dataclass(frozen=True)

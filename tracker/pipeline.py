@@ -81,7 +81,7 @@ class Pipeline:
         t1 = clock()
         undistort_before = self.mapper.spent_ns
         seen = frame if self.motion is None else SmoothedView(frame, _TEXTURE_BLUR_PX)
-        measurements = self.measurer(seen, self.segmenter.reference, guarded.mask)
+        measurements = self.measurer(seen, self.segmenter.reference, guarded.mask, self._known(t_ns))
         if guarded.at_edge:
             # A blob reaching the edge of the region of interest may go on outside it: clipped.
             measurements = [dataclasses.replace(m, clipped=True) if m.bbox_px in guarded.at_edge else m
@@ -95,6 +95,13 @@ class Pipeline:
         self.stage_ns.update(segment=t1 - t0, undistort=undistort, measure=t2 - t1 - undistort, track=t3 - t2)
         return FrameResult(index, t_ns, objects, tuple(measurements), belt_mm_s=belt,
                            scene_fault=guarded.scene_fault)
+
+    def _known(self, t_ns: int) -> list:
+        """The tracked parts where they are expected now, in the world frame (boxes lean on their sizes)."""
+        if self.config.measure.part_height_mm <= 0 or self.config.measure.estimate_height:
+            return []
+        ox, oy = self._belt_offset_mm
+        return [dataclasses.replace(k, x_mm=k.x_mm + ox, y_mm=k.y_mm + oy) for k in self.tracker.known(t_ns)]
 
     def _track(self, measurements: list, t_ns: int, belt: tuple[float, float] | None) -> tuple:
         if belt is None:

@@ -9,18 +9,18 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
+from tracker.boxfit import SizePrior
 from tracker.config import TrackConfig
 from tracker.geometry import rectangle_corners, wrap_angle_deg
 from tracker.kalman import ANGLE, LENGTH, VX, VY, WIDTH, X, Y, make_filter, set_interval
-from tracker.measure import Measurement
+from tracker.measure import KnownPart, Measurement
 from tracker.poses import TrackedObject
 
 
 class Track:
     def __init__(self, track_id: int, m: Measurement, t_ns: int, cfg: TrackConfig) -> None:
-        r = m.rect
         self.id = track_id
-        self.kf = make_filter(np.array([r.x_mm, r.y_mm, r.angle_deg, r.length_mm, r.width_mm]), cfg)
+        self.kf = _filter_from(m, cfg)
         self.t_ns = t_ns
         self.missed = 0  # consecutive frames without any blob
         self.hits = 1  # frames with a measurement
@@ -90,8 +90,7 @@ class Track:
     def restart(self, m: Measurement, cfg: TrackConfig) -> None:
         """Start the filter again from this blob: the part's size was wrong (a young track born of a sliver,
         or an established one whose blobs have kept another size for max_coast_s)."""
-        self.kf = make_filter(np.array([m.rect.x_mm, m.rect.y_mm, m.rect.angle_deg, m.rect.length_mm,
-                                        m.rect.width_mm]), cfg)
+        self.kf = _filter_from(m, cfg)
         self.odd_size_since_ns = None
 
     def settled(self, cfg: TrackConfig) -> bool:
@@ -109,13 +108,28 @@ class Track:
         # take the one nearer the prediction, so near-square parts do not flip by 90 deg.
         d_long = wrap_angle_deg(r.angle_deg - predicted)
         d_short = wrap_angle_deg(r.angle_deg + 90.0 - predicted)
-        if abs(d_long) <= abs(d_short):
-            z = [r.x_mm, r.y_mm, predicted + d_long, r.length_mm, r.width_mm]
+        swapped = abs(d_long) > abs(d_short)
+        if not swapped:
+            z = np.array([r.x_mm, r.y_mm, predicted + d_long, r.length_mm, r.width_mm])
         else:
-            z = [r.x_mm, r.y_mm, predicted + d_short, r.width_mm, r.length_mm]
-        self.kf.update(np.array(z, dtype=np.float64).reshape(5, 1))
+            z = np.array([r.x_mm, r.y_mm, predicted + d_short, r.width_mm, r.length_mm])
+        r_cov = self.kf.R if m.size_cov_mm2 is None else self._size_noise(m, swapped, cfg)
+        self.kf.update(z.reshape(5, 1), R=r_cov)
         self._normalise()
         self._history.append((self.t_ns, self.kf.x.copy(), self.kf.P.copy()))
+
+    def _size_noise(self, m: Measurement, swapped: bool, cfg: TrackConfig) -> np.ndarray:
+        """The measurement's noise covariance: a box's size counts as much as its view tells (see BoxFit)."""
+        order = [1, 0] if swapped else [0, 1]
+        r_cov = self.kf.R.copy()
+        r_cov[3:, 3:] = m.size_cov_mm2[np.ix_(order, order)] + np.eye(2) * cfg.size_sigma_mm**2
+        return r_cov
+
+    def known(self, cfg: TrackConfig) -> KnownPart:
+        """Where the part is expected (as last predicted) and its size as known so far."""
+        x = self.kf.x[:, 0]
+        sigma = np.sqrt(np.maximum(np.diag(self.kf.P)[[LENGTH, WIDTH]], cfg.known_size_sigma_mm**2))
+        return KnownPart(float(x[X]), float(x[Y]), SizePrior(float(x[LENGTH]), float(x[WIDTH]), *map(float, sigma)))
 
     def _normalise(self) -> None:
         """Keep the angle in (-90, 90] and the length the longer side (180 deg symmetry)."""
@@ -150,6 +164,16 @@ class Track:
         return t_ns - self.seen_ns > cfg.max_coast_s * 1e9
 
 
+def _filter_from(m: Measurement, cfg: TrackConfig):
+    """A filter started at measurement ``m``: its size as sure as its view made it (see BoxFit)."""
+    r = m.rect
+    kf = make_filter(np.array([r.x_mm, r.y_mm, r.angle_deg, r.length_mm, r.width_mm]), cfg)
+    if m.size_cov_mm2 is not None:
+        size = [LENGTH, WIDTH]
+        kf.P[np.ix_(size, size)] = m.size_cov_mm2 + np.eye(2) * cfg.size_sigma_mm**2
+    return kf
+
+
 class Tracker:
     """Greedy nearest-neighbour association of measurements to Kalman tracks."""
 
@@ -159,6 +183,15 @@ class Tracker:
         self._in_view = in_view or (lambda x, y: True)
         self.tracks: list[Track] = []
         self._next_id = 1
+
+    def known(self, t_ns: int) -> list[KnownPart]:
+        """The settled parts, predicted to ``t_ns``: what the measurement may lean on."""
+        out = []
+        for track in self.tracks:
+            if track.settled(self.config) and not track.tentative and track.odd_size_since_ns is None:
+                track.predict(t_ns, self.config)
+                out.append(track.known(self.config))
+        return out
 
     def step(self, measurements: list[Measurement], t_ns: int) -> tuple[TrackedObject, ...]:
         cfg = self.config
