@@ -6,7 +6,9 @@ Prints a Markdown table (the README's "Parts with height" figures come from it).
 not the tests' (other cameras, part sizes, shades, paths and speeds): boxes 5, 10, 20 and 60 mm
 tall crossing the whole view while turning, under cameras tilted 0, 10 and 20 deg, and a pair of
 parts of different heights at once. For auto, the height and centroid errors are split into the
-frames before and after the track says its height has converged.
+frames before and after the track says its height has converged. The last column is the
+measurement stage's own time per frame (one part in view), with the height given and flat, in
+the same run.
 """
 
 from __future__ import annotations
@@ -44,14 +46,18 @@ def pair_scene() -> SceneSpec:
     return SceneSpec(cam, parts, fps=30, n_frames=90, supersample=4, blur_samples=3, belt_level=70.0, seed=8)
 
 
-def run(scene: SceneSpec, measure: MeasureConfig) -> tuple[list[dict], list[dict]]:
+def run(scene: SceneSpec, measure: MeasureConfig, spent: dict | None = None) -> tuple[list[dict], list[dict]]:
+    """Poses and truths of ``scene``; ``spent``: gets the measurement stage's mean ms per frame."""
     renderer = Renderer(scene)
     pipeline = Pipeline(renderer.calibration, TrackerConfig(measure=measure))
-    poses, truths = [], []
+    poses, truths, measure_ns = [], [], 0
     for i in range(scene.n_frames):
         image, truth = renderer.render(i)
         poses.append(pipeline.process(i, image, scene.t_ns(i)).to_dict())
+        measure_ns += pipeline.stage_ns["measure"] + pipeline.stage_ns["undistort"]
         truths.append(truth)
+    if spent is not None:
+        spent["ms"] = measure_ns / scene.n_frames / 1e6
     return poses, truths
 
 
@@ -86,9 +92,11 @@ def measure_all(quick: bool = False) -> list[dict]:
     for name, scene, height in cases:
         row = {"scene": name}
         if height is not None:
-            given = evaluate(*run(scene, MeasureConfig(part_height_mm=height)), skip_first=2).summary()
-            flat = evaluate(*run(scene, MeasureConfig()), skip_first=2).summary()
-            row |= {"given": given, "flat_centroid_mean_mm": flat["centroid_mean_mm"]}
+            given_ms, flat_ms = {}, {}
+            given = evaluate(*run(scene, MeasureConfig(part_height_mm=height), given_ms), skip_first=2).summary()
+            flat = evaluate(*run(scene, MeasureConfig(), flat_ms), skip_first=2).summary()
+            row |= {"given": given, "flat_centroid_mean_mm": flat["centroid_mean_mm"],
+                    "measure_ms": given_ms["ms"], "flat_measure_ms": flat_ms["ms"]}
         auto_poses, auto_truths = run(scene, MeasureConfig(estimate_height=True))
         row["auto"] = auto_errors(auto_poses, auto_truths) | {
             "centroid_mean_mm": evaluate(auto_poses, auto_truths, skip_first=2).summary()["centroid_mean_mm"]}
@@ -107,15 +115,16 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     print("| scene | given: centroid mean / p95 (mm) | angle mean (deg) | length / width max (mm) | flat: centroid "
           "mean (mm) | auto: height before / after converged (mm) | auto: centroid before / after (mm) "
-          "| auto: converged |")
-    print("|---|---|---|---|---|---|---|---|")
+          "| auto: converged | measure ms/frame: given / flat |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         g, a = r.get("given"), r["auto"]
         given = (f"{g['centroid_mean_mm']:.3f} / {g['centroid_p95_mm']:.3f} | {g['angle_mean_deg']:.3f} "
                  f"| {g['length_max_mm']:.2f} / {g['width_max_mm']:.2f} | {r['flat_centroid_mean_mm']:.2f}"
                  if g else "- | - | - | -")
         print(f"| {r['scene']} | {given} | {a['h_before']:.2f} / {a['h_after']:.2f} (max {a['h_after_max']:.2f}) "
-              f"| {a['c_before']:.3f} / {a['c_after']:.3f} | {100 * a['converged_fraction']:.0f} % |")
+              f"| {a['c_before']:.3f} / {a['c_after']:.3f} | {100 * a['converged_fraction']:.0f} % "
+              f"| {r.get('measure_ms', math.nan):.1f} / {r.get('flat_measure_ms', math.nan):.1f} |")
     return 0
 
 

@@ -26,7 +26,7 @@ _H = 5
 # Finite-difference steps: mm, the angle in degrees.
 _STEP = np.array([0.01, 0.01, 0.005, 0.01, 0.01, 0.01])
 # Iterations of each stage: the outline's from the start rectangle, the sums' from the outline's result.
-_OUTLINE_ITERATIONS, _SUM_ITERATIONS = 20, 5
+_OUTLINE_ITERATIONS, _SUM_ITERATIONS = 20, 8
 # Converged once no parameter moves by more than this fraction of its difference step.
 _CONVERGED = 0.05
 # The side shades' prior, and how weakly it holds them (px of residual per unit of shade): a side

@@ -112,6 +112,9 @@ class MeasureConfig:
     # With a part height: a box outline fitting its edge points worse than this (px RMS) means
     # the part is no box (a cylinder lying down, a bag); its top-face rectangle is kept instead.
     box_max_rms_px: float = 1.0
+    # At most this many of a box's edge windows are fitted (evenly thinned beyond): the fit's cost
+    # grows with them (bench/heights.py), while beyond a couple of hundred the pose hardly improves.
+    box_max_windows: int = 240
     # A box's coverage sums scatter by about this much (px, 1 sigma): it weighs a size known from a
     # track's other views against the sums of one view, where a thin side face leaves the size open.
     sum_sigma_px: float = 0.1
@@ -124,7 +127,7 @@ class MeasureConfig:
 
     def __post_init__(self) -> None:
         _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "box_max_rms_px",
-                  "touch_min_notch_px", "sum_sigma_px", "square_mm")
+                  "touch_min_notch_px", "sum_sigma_px", "square_mm", "box_max_windows")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
         try:

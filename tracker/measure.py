@@ -221,10 +221,13 @@ class Measurer:
         inner_c, out_c = edges.cols.ends_px()
         inner = np.concatenate([inner_r, inner_c[:, ::-1]]) + edges.origin
         outward = np.concatenate([out_r, out_c[:, ::-1]])
+        covered = np.concatenate([edges.rows.covered(edges.levels[0]), edges.cols.covered(edges.levels[1])])
+        # The fit's cost grows with the windows: a large part's are thinned evenly along its outline.
+        every = max(1, math.ceil(len(inner) / self.config.box_max_windows))
+        inner, outward, covered = inner[::every], outward[::every], covered[::every]
         k = HALF_WINDOW_PX
         n = len(inner)
         ends = self.mapper.to_norm(np.concatenate([inner, inner + 2 * k * outward]))
-        covered = np.concatenate([edges.rows.covered(edges.levels[0]), edges.cols.covered(edges.levels[1])])
         # The level pixel (see _Crossings.face_levels) is the window's (k+2)-th from its inner end.
         return EdgeWindows(ends[:n], (ends[n:] - ends[:n]) / (2 * k), covered, 2.0 * k, (k - 2.0, k - 1.0))
 
