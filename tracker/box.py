@@ -18,6 +18,7 @@ hull of the 8 corners, against the edge points).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -26,6 +27,8 @@ import numpy as np
 
 from tracker.calibration import Calibration
 
+# Gauss's two points across a pixel (px from its middle): exact for a share linear along its height.
+_GAUSS = 0.5 / math.sqrt(3.0)
 # Face kinds: the top, the sides facing the part's own x (its ends) and those facing its y.
 TOP, SIDE_X, SIDE_Y = 0, 1, 2
 
@@ -38,6 +41,8 @@ class EdgeWindows:
     part) outwards, ``step_norm`` per pixel (normalised coordinates, the lens's distortion taken
     as linear over a few pixels); ``covered_px`` is how many pixels of it the part covers, in
     units of the contrast of the pixel that spans ``level_px`` (from, to: px from the inner end).
+    ``blur_px``: the image's blur (a Gaussian's sigma, px) that spreads each face's level into the
+    pixels next to it: the level pixel of a window across a thin side face is a blurred mix.
     """
 
     inner_norm: np.ndarray  # (N, 2)
@@ -45,6 +50,7 @@ class EdgeWindows:
     covered_px: np.ndarray  # (N,)
     span_px: float
     level_px: tuple[float, float]
+    blur_px: float = 0.0
 
     def __post_init__(self) -> None:
         n = len(self.covered_px)
@@ -57,7 +63,7 @@ class EdgeWindows:
 
     def subset(self, which: np.ndarray) -> EdgeWindows:
         return EdgeWindows(self.inner_norm[which], self.step_norm[which], self.covered_px[which], self.span_px,
-                           self.level_px)
+                           self.level_px, self.blur_px)
 
 
 class BoxCamera:
@@ -147,17 +153,20 @@ def lengths_in_faces(windows: EdgeWindows, polygons: np.ndarray) -> tuple[np.nda
     window, and the share of its level pixel (``level_px``), each (P, N, F). A window's line is
     clipped to each convex polygon (Cyrus-Beck); its level pixel, a square, is clipped to it
     (Sutherland-Hodgman) for the share of its area: a sum is read against that pixel's value, so an
-    error in its share is an error of the whole sum."""
+    error in its share is an error of the whole sum. In a blurred image (``blur_px``) both are what
+    the blur makes of them along the window's line (the level pixel's share read on two lines across
+    it: Gauss's points)."""
     n_box, n_face = polygons.shape[:2]
     total = np.zeros((n_box, len(windows), n_face))
     level = np.zeros_like(total)
     _clip(np.ascontiguousarray(polygons, dtype=np.float64), np.ascontiguousarray(windows.inner_norm),
-          np.ascontiguousarray(windows.step_norm), float(windows.span_px), *map(float, windows.level_px), total, level)
+          np.ascontiguousarray(windows.step_norm), float(windows.span_px), *map(float, windows.level_px),
+          float(windows.blur_px), total, level)
     return total, level
 
 
 @numba.njit(cache=True)
-def _clip(polygons, inner, step, span, level_from, level_to, total, level):  # pragma: no cover (compiled)
+def _clip(polygons, inner, step, span, level_from, level_to, blur, total, level):  # pragma: no cover (compiled)
     # The fit's hot loop (a few hundred windows x 3 faces x 7 boxes per Jacobian, tens of times per
     # part and frame): compiled, it costs a tenth of the same in numpy's whole-array steps.
     normal = np.empty((4, 2))
@@ -182,19 +191,17 @@ def _clip(polygons, inner, step, span, level_from, level_to, total, level):  # p
                 offset[k] = normal[k, 0] * a[k, 0] + normal[k, 1] * a[k, 1]
             for n in range(inner.shape[0]):
                 qx, qy, dx, dy = inner[n, 0], inner[n, 1], step[n, 0], step[n, 1]
-                lo, hi, empty = -np.inf, np.inf, False
-                for k in range(4):
-                    # Inside edge k where s * den <= num.
-                    num = offset[k] - (normal[k, 0] * qx + normal[k, 1] * qy)
-                    den = normal[k, 0] * dx + normal[k, 1] * dy
-                    if den < 0:
-                        lo = max(lo, num / den)
-                    elif den > 0:
-                        hi = min(hi, num / den)
-                    elif num < 0:
-                        empty = True  # parallel to the edge and outside it
-                if not empty:
-                    total[p, n, f] = max(min(hi, span) - max(lo, 0.0), 0.0)
+                lo, hi, stretch_lo, stretch_hi = _interval(normal, offset, qx, qy, dx, dy)
+                if blur > 0:
+                    # The image's blur, across each edge; along the line it is longer where the edge slants.
+                    total[p, n, f] = _blurred(lo, hi, 0.0, span, blur * stretch_lo, blur * stretch_hi)
+                    for shift in (-_GAUSS, _GAUSS):
+                        lo, hi, stretch_lo, stretch_hi = _interval(normal, offset, qx - shift * dy, qy + shift * dx,
+                                                                   dx, dy)
+                        share = _blurred(lo, hi, level_from, level_to, blur * stretch_lo, blur * stretch_hi)
+                        level[p, n, f] += 0.5 * share / (level_to - level_from)
+                    continue
+                total[p, n, f] = max(min(hi, span) - max(lo, 0.0), 0.0)
                 # The level pixel: a square along the window (the lens locally conformal), clipped to the face.
                 count = 4
                 for c in range(4):
@@ -213,6 +220,49 @@ def _clip(polygons, inner, step, span, level_from, level_to, total, level):  # p
                     area += square[c, 0] * square[j, 1] - square[j, 0] * square[c, 1]
                 pixel = (level_to - level_from) * (dx * dx + dy * dy)
                 level[p, n, f] = min(abs(area) / 2.0 / pixel, 1.0) if pixel > 0 else 0.0
+
+
+@numba.njit(cache=True)
+def _interval(normal, offset, qx, qy, dx, dy):  # pragma: no cover (compiled)
+    """Where the line q + s d is inside the convex polygon of edges (normal . x <= offset): (lo, hi),
+    and for each end how much longer along the line than across its edge a blur is (1 / cos)."""
+    lo, hi, stretch_lo, stretch_hi = -np.inf, np.inf, 1.0, 1.0
+    length = math.sqrt(dx * dx + dy * dy)
+    for k in range(4):
+        num = offset[k] - (normal[k, 0] * qx + normal[k, 1] * qy)
+        den = normal[k, 0] * dx + normal[k, 1] * dy
+        if den == 0:
+            if num < 0:
+                return 0.0, 0.0, 1.0, 1.0
+            continue
+        t = num / den
+        stretch = math.sqrt(normal[k, 0] ** 2 + normal[k, 1] ** 2) * length / abs(den)
+        if den < 0 and t > lo:
+            lo, stretch_lo = t, stretch
+        elif den > 0 and t < hi:
+            hi, stretch_hi = t, stretch
+    return lo, hi, stretch_lo, stretch_hi
+
+
+@numba.njit(cache=True)
+def _blurred(lo, hi, a, b, sigma_lo, sigma_hi):  # pragma: no cover (compiled)
+    """How much of the pixels [a, b] of a line a face on [lo, hi] covers once blurred: each end a
+    Gaussian step (sigma_lo, sigma_hi along the line), Phi((s - lo) / sigma_lo) - Phi((s - hi) / sigma_hi)
+    integrated over [a, b] in closed form (the antiderivative of Phi(u) is u Phi(u) + phi(u))."""
+    if hi <= lo:
+        return 0.0
+
+    def g(u):
+        return u * 0.5 * (1.0 + math.erf(u / math.sqrt(2.0))) + math.exp(-0.5 * u * u) / math.sqrt(2.0 * math.pi)
+
+    def rise(edge, sigma):  # the integral over [a, b] of Phi((s - edge) / sigma)
+        if edge == -np.inf:
+            return b - a
+        if edge == np.inf:
+            return 0.0
+        return sigma * (g((b - edge) / sigma) - g((a - edge) / sigma))
+
+    return rise(lo, sigma_lo) - rise(hi, sigma_hi)
 
 
 @numba.njit(cache=True)

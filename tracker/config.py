@@ -112,6 +112,10 @@ class MeasureConfig:
     # With a part height: a box outline fitting its edge points worse than this (px RMS) means
     # the part is no box (a cylinder lying down, a bag); its top-face rectangle is kept instead.
     box_max_rms_px: float = 1.0
+    # The camera's blur of an edge (a Gaussian's sigma, px: optics and focus; 0 for a sharp image).
+    # A box's thin side face is a blurred mix in the pixels next to its edge, and the box fit
+    # models that mix: with 1 px of blur left out, 10-20 mm boxes are off by 0.2-0.4 mm.
+    edge_blur_px: float = 0.0
     # At most this many of a box's edge windows are fitted (evenly thinned beyond): the fit's cost
     # grows with them (bench/heights.py), while beyond a couple of hundred the pose hardly improves.
     box_max_windows: int = 240
@@ -130,6 +134,8 @@ class MeasureConfig:
                   "touch_min_notch_px", "sum_sigma_px", "square_mm", "box_max_windows")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
+        if not 0 <= self.edge_blur_px <= 5:
+            raise BadInput(f"measure.edge_blur_px: expected a blur from 0 to 5 px, got {self.edge_blur_px}")
         try:
             # JSON gives a list; keep the frozen settings hashable and equal however given.
             starts = tuple(float(h) for h in self.height_starts_mm)

@@ -57,9 +57,12 @@ class Measurement:
 
 
 class Measurer:
-    def __init__(self, mapper: BeltMapper, config: MeasureConfig) -> None:
+    def __init__(self, mapper: BeltMapper, config: MeasureConfig, smoothing_px: float = 0.0) -> None:
+        """``smoothing_px``: the blur (Gaussian sigma) the pipeline applies to frames before measuring."""
         self.mapper = mapper
         self.config = config
+        # The blur edges are seen through: the camera's own, and the pipeline's on top.
+        self._blur_px = math.hypot(config.edge_blur_px, smoothing_px)
         self._width, self._height = mapper.calibration.size
         # Conservative pixel-area pre-filter, so tiny specks are never mapped at all.
         self._min_area_px = 0.5 * config.min_area_mm2 / mapper.max_mm_per_px() ** 2
@@ -229,7 +232,8 @@ class Measurer:
         n = len(inner)
         ends = self.mapper.to_norm(np.concatenate([inner, inner + 2 * k * outward]))
         # The level pixel (see _Crossings.face_levels) is the window's (k+2)-th from its inner end.
-        return EdgeWindows(ends[:n], (ends[n:] - ends[:n]) / (2 * k), covered, 2.0 * k, (k - 2.0, k - 1.0))
+        return EdgeWindows(ends[:n], (ends[n:] - ends[:n]) / (2 * k), covered, 2.0 * k, (k - 2.0, k - 1.0),
+                           self._blur_px)
 
 
 @dataclass(frozen=True)

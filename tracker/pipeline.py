@@ -49,7 +49,7 @@ class Pipeline:
         self.roi_mask = None if self.roi_px is None else roi
         self.segmenter = make_segmenter(seg, roi, calibration.mm_per_px_at_centre())
         self.mapper = mapper = BeltMapper(calibration, self.config.measure.part_height_mm)
-        self.measurer = Measurer(mapper, self.config.measure)
+        self.measurer = Measurer(mapper, self.config.measure, _TEXTURE_BLUR_PX if seg.model == "textured" else 0.0)
         # The belt's own motion is measured where the belt model needs it (textured belts).
         self.motion = BeltMotion(roi) if seg.model == "textured" else None
         self._roi_centre_px = np.array(cv2.boundingRect(roi), dtype=np.float64)
