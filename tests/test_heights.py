@@ -5,16 +5,18 @@ mean 0.02-0.11 mm, p95 at most 0.33 mm, angle at most 0.03 deg for 5-60 mm tall 
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
-from conftest import run_pipeline
+from conftest import rendered, run_pipeline
 
 from tracker.box import EdgeWindows, lengths_in_faces
 from tracker.boxfit import _best_shades
 from tracker.cli import main
 from tracker.config import MeasureConfig, TrackerConfig
 from tracker.evaluate import evaluate
-from tracker.synthetic import CameraSpec, PartSpec, SceneSpec
+from tracker.pipeline import Pipeline
+from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec
 
 
 def _box_scene(height_mm: float, tilt_deg: float) -> SceneSpec:
@@ -46,6 +48,26 @@ def test_the_box_faces_give_the_footprint(height_mm, tilt_deg):
     # The same part measured as if flat is off by millimetres: the box model is what fixes it.
     assert flat["centroid_mean_mm"] > 5 * given["centroid_mean_mm"], (flat, given)
     assert all(o["height_mm"] == height_mm for p in poses for o in p["objects"])
+
+
+def test_a_blurred_image_is_measured_with_its_blur():
+    """A camera's blur (here a Gaussian of 1 px on every frame) spreads a thin side face into the
+    pixels next to its edge; told of it (measure.edge_blur_px), the fit models the mix. Measured:
+    0.08 mm centroid mean against 0.21 mm with the blur left out."""
+    scene = _box_scene(10, 10)
+    _, frames = rendered(scene)
+    blurred = [cv2.GaussianBlur(image, (0, 0), 1.0) for image, _ in frames]
+    truths = [truth for _, truth in frames]
+
+    def summary(blur_px: float) -> dict:
+        config = TrackerConfig(measure=MeasureConfig(part_height_mm=10, edge_blur_px=blur_px))
+        pipeline = Pipeline(Renderer(scene).calibration, config)
+        poses = [pipeline.process(i, image, scene.t_ns(i)).to_dict() for i, image in enumerate(blurred)]
+        return evaluate(poses, truths, skip_first=2).summary()
+
+    told, untold = summary(1.0), summary(0.0)
+    assert told["centroid_mean_mm"] <= 0.12 and told["width_max_mm"] <= 0.5, told
+    assert untold["centroid_mean_mm"] > 1.5 * told["centroid_mean_mm"], (told, untold)
 
 
 def test_window_lengths_in_a_face_are_exact():
