@@ -18,17 +18,13 @@ hull of the 8 corners, against the edge points).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import cv2
-import numba
 import numpy as np
 
 from tracker.calibration import Calibration
 
-# Gauss's two points across a pixel (px from its middle): exact for a share linear along its height.
-_GAUSS = 0.5 / math.sqrt(3.0)
 # Face kinds: the top, the sides facing the part's own x (its ends) and those facing its y.
 TOP, SIDE_X, SIDE_Y = 0, 1, 2
 
@@ -156,129 +152,23 @@ def lengths_in_faces(windows: EdgeWindows, polygons: np.ndarray) -> tuple[np.nda
     error in its share is an error of the whole sum. In a blurred image (``blur_px``) both are what
     the blur makes of them along the window's line (the level pixel's share read on two lines across
     it: Gauss's points)."""
+    # Compiled on first use (numba): flat parts never load it, and a run with boxes compiles it at start.
+    from tracker.facecover import clip  # noqa: PLC0415
+
     n_box, n_face = polygons.shape[:2]
     total = np.zeros((n_box, len(windows), n_face))
     level = np.zeros_like(total)
-    _clip(np.ascontiguousarray(polygons, dtype=np.float64), np.ascontiguousarray(windows.inner_norm),
-          np.ascontiguousarray(windows.step_norm), float(windows.span_px), *map(float, windows.level_px),
-          float(windows.blur_px), total, level)
+    clip(np.ascontiguousarray(polygons, dtype=np.float64), np.ascontiguousarray(windows.inner_norm),
+         np.ascontiguousarray(windows.step_norm), float(windows.span_px), *map(float, windows.level_px),
+         float(windows.blur_px), total, level)
     return total, level
 
 
-@numba.njit(cache=True)
-def _clip(polygons, inner, step, span, level_from, level_to, blur, total, level):  # pragma: no cover (compiled)
-    # The fit's hot loop (a few hundred windows x 3 faces x 7 boxes per Jacobian, tens of times per
-    # part and frame): compiled, it costs a tenth of the same in numpy's whole-array steps.
-    normal = np.empty((4, 2))
-    offset = np.empty(4)
-    square = np.empty((12, 2))
-    spare = np.empty((12, 2))
-    for p in range(polygons.shape[0]):
-        for f in range(polygons.shape[1]):
-            a = polygons[p, f]
-            area2 = 0.0
-            for k in range(4):
-                j = (k + 1) % 4
-                area2 += a[k, 0] * a[j, 1] - a[j, 0] * a[k, 1]
-            if area2 == 0.0:
-                continue  # a face seen edge-on covers nothing
-            sign = 1.0 if area2 > 0 else -1.0
-            for k in range(4):
-                j = (k + 1) % 4
-                # Outward normals whichever way round the projected polygon runs.
-                normal[k, 0] = (a[j, 1] - a[k, 1]) * sign
-                normal[k, 1] = -(a[j, 0] - a[k, 0]) * sign
-                offset[k] = normal[k, 0] * a[k, 0] + normal[k, 1] * a[k, 1]
-            for n in range(inner.shape[0]):
-                qx, qy, dx, dy = inner[n, 0], inner[n, 1], step[n, 0], step[n, 1]
-                lo, hi, stretch_lo, stretch_hi = _interval(normal, offset, qx, qy, dx, dy)
-                if blur > 0:
-                    # The image's blur, across each edge; along the line it is longer where the edge slants.
-                    total[p, n, f] = _blurred(lo, hi, 0.0, span, blur * stretch_lo, blur * stretch_hi)
-                    for shift in (-_GAUSS, _GAUSS):
-                        lo, hi, stretch_lo, stretch_hi = _interval(normal, offset, qx - shift * dy, qy + shift * dx,
-                                                                   dx, dy)
-                        share = _blurred(lo, hi, level_from, level_to, blur * stretch_lo, blur * stretch_hi)
-                        level[p, n, f] += 0.5 * share / (level_to - level_from)
-                    continue
-                total[p, n, f] = max(min(hi, span) - max(lo, 0.0), 0.0)
-                # The level pixel: a square along the window (the lens locally conformal), clipped to the face.
-                count = 4
-                for c in range(4):
-                    s_along = level_from if c in (0, 3) else level_to
-                    s_across = -0.5 if c < 2 else 0.5
-                    square[c, 0] = qx + s_along * dx - s_across * dy
-                    square[c, 1] = qy + s_along * dy + s_across * dx
-                for k in range(4):
-                    count = _cut(square, spare, count, normal[k, 0], normal[k, 1], offset[k])
-                    square, spare = spare, square
-                    if count == 0:
-                        break
-                area = 0.0
-                for c in range(count):
-                    j = (c + 1) % count
-                    area += square[c, 0] * square[j, 1] - square[j, 0] * square[c, 1]
-                pixel = (level_to - level_from) * (dx * dx + dy * dy)
-                level[p, n, f] = min(abs(area) / 2.0 / pixel, 1.0) if pixel > 0 else 0.0
-
-
-@numba.njit(cache=True)
-def _interval(normal, offset, qx, qy, dx, dy):  # pragma: no cover (compiled)
-    """Where the line q + s d is inside the convex polygon of edges (normal . x <= offset): (lo, hi),
-    and for each end how much longer along the line than across its edge a blur is (1 / cos)."""
-    lo, hi, stretch_lo, stretch_hi = -np.inf, np.inf, 1.0, 1.0
-    length = math.sqrt(dx * dx + dy * dy)
-    for k in range(4):
-        num = offset[k] - (normal[k, 0] * qx + normal[k, 1] * qy)
-        den = normal[k, 0] * dx + normal[k, 1] * dy
-        if den == 0:
-            if num < 0:
-                return 0.0, 0.0, 1.0, 1.0
-            continue
-        t = num / den
-        stretch = math.sqrt(normal[k, 0] ** 2 + normal[k, 1] ** 2) * length / abs(den)
-        if den < 0 and t > lo:
-            lo, stretch_lo = t, stretch
-        elif den > 0 and t < hi:
-            hi, stretch_hi = t, stretch
-    return lo, hi, stretch_lo, stretch_hi
-
-
-@numba.njit(cache=True)
-def _blurred(lo, hi, a, b, sigma_lo, sigma_hi):  # pragma: no cover (compiled)
-    """How much of the pixels [a, b] of a line a face on [lo, hi] covers once blurred: each end a
-    Gaussian step (sigma_lo, sigma_hi along the line), Phi((s - lo) / sigma_lo) - Phi((s - hi) / sigma_hi)
-    integrated over [a, b] in closed form (the antiderivative of Phi(u) is u Phi(u) + phi(u))."""
-    if hi <= lo:
-        return 0.0
-
-    def g(u):
-        return u * 0.5 * (1.0 + math.erf(u / math.sqrt(2.0))) + math.exp(-0.5 * u * u) / math.sqrt(2.0 * math.pi)
-
-    def rise(edge, sigma):  # the integral over [a, b] of Phi((s - edge) / sigma)
-        if edge == -np.inf:
-            return b - a
-        if edge == np.inf:
-            return 0.0
-        return sigma * (g((b - edge) / sigma) - g((a - edge) / sigma))
-
-    return rise(lo, sigma_lo) - rise(hi, sigma_hi)
-
-
-@numba.njit(cache=True)
-def _cut(src, dst, count, nx, ny, offset):  # pragma: no cover (compiled)
-    """Sutherland-Hodgman: the polygon ``src[:count]`` cut to n . x <= offset, into ``dst``; its count."""
-    out = 0
-    for c in range(count):
-        j = (c + 1) % count
-        ax, ay, bx, by = src[c, 0], src[c, 1], src[j, 0], src[j, 1]
-        da = nx * ax + ny * ay - offset
-        db = nx * bx + ny * by - offset
-        if da <= 0:
-            dst[out, 0], dst[out, 1] = ax, ay
-            out += 1
-        if (da < 0 < db) or (db < 0 < da):
-            t = da / (da - db)
-            dst[out, 0], dst[out, 1] = ax + t * (bx - ax), ay + t * (by - ay)
-            out += 1
-    return out
+def compile_model() -> None:
+    """Compile the face model now (about 1.5 s the first time, a cached load after): a run with boxes
+    calls this before its first frame, so the loop never waits on the compiler."""
+    windows = EdgeWindows(np.zeros((1, 2)), np.array([[1.0, 0.0]]), np.zeros(1), 6.0, (1.0, 2.0))
+    square = np.array([[[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]]])
+    lengths_in_faces(windows, square)
+    lengths_in_faces(EdgeWindows(windows.inner_norm, windows.step_norm, windows.covered_px, 6.0, (1.0, 2.0), 1.0),
+                     square)

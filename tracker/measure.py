@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
-from tracker.box import BoxCamera, EdgeWindows
+from tracker.box import BoxCamera, EdgeWindows, compile_model
 from tracker.boxfit import BoxFit, SizePrior, fit_box
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
@@ -71,6 +71,8 @@ class Measurer:
         # Parts are boxes with side faces (a height given or estimated), not flat rectangles.
         self._boxes = config.part_height_mm > 0 or config.estimate_height
         self._focal_px = float(mapper.calibration.camera_matrix[0, 0])
+        if self._boxes:
+            compile_model()
         self._split_rule = SplitRule(config.touch_min_notch_px, self._min_area_px)
         self._known: Sequence[KnownPart] = ()
 
