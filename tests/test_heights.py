@@ -13,10 +13,13 @@ from conftest import rendered, run_pipeline
 from tracker.box import EdgeWindows, lengths_in_faces
 from tracker.boxfit import _best_shades
 from tracker.cli import main
-from tracker.config import MeasureConfig, TrackerConfig
+from tracker.config import MeasureConfig, TrackConfig, TrackerConfig
 from tracker.evaluate import evaluate
+from tracker.geometry import Rect
+from tracker.measure import Measurement
 from tracker.pipeline import Pipeline
 from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec
+from tracker.track import Tracker
 
 
 def _box_scene(height_mm: float, tilt_deg: float) -> SceneSpec:
@@ -124,6 +127,24 @@ def test_auto_estimates_a_tall_box_seen_at_a_tilt():
     assert max(abs(h - 60.0) for h in third) <= 0.5, third
     s = evaluate(poses, truths, skip_first=2).summary()
     assert s["centroid_mean_mm"] <= 0.2 and s["angle_mean_deg"] <= 0.05, s
+
+
+def test_an_estimated_height_settles_only_after_views_that_tell_it():
+    """--part-height auto: a track is 'height not yet converged' until enough views told its height
+    (TrackConfig.height_converged_views), however sure one view says it is; with the height given
+    there is nothing to settle."""
+    cfg = TrackConfig()
+
+    def view(k: int, height_mm: float | None) -> Measurement:
+        return Measurement(Rect(10.0 * k, 0.0, 0.0, 80.0, 50.0), False, (0, 0, 1, 1), (0.0, 0.0), 40,
+                           height_mm, 0.01)
+
+    estimating, given = Tracker(cfg, estimating_height=True), Tracker(cfg)
+    first = estimating.step([view(0, None)], 0)[0]
+    assert not first.height_converged and given.step([view(0, None)], 0)[0].height_converged
+    settled = [estimating.step([view(k, 12.0)], k * 33_000_000)[0].height_converged
+               for k in range(1, cfg.height_converged_views + 1)]
+    assert settled == [False] * (cfg.height_converged_views - 1) + [True]
 
 
 def test_a_cylinder_lying_down_is_no_box_but_its_pose_stays_sane():

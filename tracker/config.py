@@ -155,6 +155,8 @@ class TrackConfig:
     size_sigma_mm: float = 0.1
     # The least uncertainty (1 sigma, mm) a track's size is lent to a box's fit with (see measure.sum_sigma_px).
     known_size_sigma_mm: float = 0.02
+    # The least uncertainty (1 sigma, mm) one view's height estimate counts with in a track's.
+    view_height_sigma_mm: float = 0.2
     # Process noise: how hard parts may accelerate / turn / change apparent size.
     accel_sigma_mm_s2: float = 2000.0
     angular_accel_sigma_deg_s2: float = 200.0
@@ -189,8 +191,10 @@ class TrackConfig:
     # ... and the blobs of the frames just before were partly hidden already: the track goes back to its
     # state this many updates earlier (its velocity untouched by them) and coasts from there.
     rewind_frames: int = 3
-    # A track's height estimate is converged once its 1-sigma uncertainty is below this (mm).
+    # A track's height estimate is converged once its 1-sigma uncertainty is below this (mm), from
+    # at least this many views (one view's sigma says how well it fits, not whether the fit is right).
     height_converged_sigma_mm: float = 0.3
+    height_converged_views: int = 5
 
     def __post_init__(self) -> None:
         _positive(self, *(f.name for f in fields(self)))

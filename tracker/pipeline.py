@@ -66,7 +66,8 @@ class Pipeline:
         # belt's stops, slow phases and duplicate frames; without it the offset stays zero.
         self._belt_offset_mm = np.zeros(2)
         self.tracker = Tracker(self.config.track, lambda x, y: cv2.pointPolygonTest(
-            outline, (x + self._belt_offset_mm[0], y + self._belt_offset_mm[1]), False) >= 0)
+            outline, (x + self._belt_offset_mm[0], y + self._belt_offset_mm[1]), False) >= 0,
+            self.config.measure.estimate_height)
         # Time spent per stage on the last frame (ns); for the status line and the benchmark only.
         self.stage_ns = dict.fromkeys(STAGES, 0)
 

@@ -18,7 +18,8 @@ from tracker.poses import TrackedObject
 
 
 class Track:
-    def __init__(self, track_id: int, m: Measurement, t_ns: int, cfg: TrackConfig) -> None:
+    def __init__(self, track_id: int, m: Measurement, t_ns: int, cfg: TrackConfig,
+                 estimating_height: bool = False) -> None:
         self.id = track_id
         self.kf = _filter_from(m, cfg)
         self.t_ns = t_ns
@@ -46,11 +47,18 @@ class Track:
         self._height_weight = 0.0
         self._height_sum = 0.0
         self._converged_sigma_mm = cfg.height_converged_sigma_mm
+        self._converged_views = cfg.height_converged_views
+        # Heights are estimated (--part-height auto): until a view has told one, it is not settled.
+        self._estimating_height = estimating_height
+        self._height_floor_mm = cfg.view_height_sigma_mm
+        self._height_views = 0
         self._add_height(m)
 
     def _add_height(self, m: Measurement) -> None:
         if m.height_mm is not None and 0 < m.height_sigma_mm < math.inf:
-            w = 1.0 / m.height_sigma_mm**2
+            # No view is surer than the model is right: one view's luck does not outweigh the rest.
+            w = 1.0 / max(m.height_sigma_mm, self._height_floor_mm) ** 2
+            self._height_views += 1
             self._height_weight += w
             self._height_sum += w * m.height_mm
 
@@ -145,10 +153,11 @@ class Track:
     def output(self, measured: Measurement | None) -> TrackedObject:
         x = self.kf.x[:, 0]
         corners = rectangle_corners(x[X], x[Y], x[ANGLE], x[LENGTH], x[WIDTH])
-        height, converged = 0.0, True
+        height, converged = 0.0, not self._estimating_height
         if self._height_weight > 0:
             height = self._height_sum / self._height_weight
-            converged = self._height_weight ** -0.5 < self._converged_sigma_mm
+            converged = (self._height_weight ** -0.5 < self._converged_sigma_mm
+                         and self._height_views >= self._converged_views)
         return TrackedObject(
             self.id, float(x[X]), float(x[Y]), float(x[ANGLE]), float(x[LENGTH]), float(x[WIDTH]),
             corners, float(x[VX]), float(x[VY]), measured is not None, measured, height_mm=height,
@@ -177,8 +186,10 @@ def _filter_from(m: Measurement, cfg: TrackConfig):
 class Tracker:
     """Greedy nearest-neighbour association of measurements to Kalman tracks."""
 
-    def __init__(self, config: TrackConfig, in_view: Callable[[float, float], bool] | None = None) -> None:
+    def __init__(self, config: TrackConfig, in_view: Callable[[float, float], bool] | None = None,
+                 estimating_height: bool = False) -> None:
         self.config = config
+        self._estimating_height = estimating_height
         # Whether a belt point is inside the camera's view: a track predicted out of view ends.
         self._in_view = in_view or (lambda x, y: True)
         self.tracks: list[Track] = []
@@ -255,7 +266,7 @@ class Tracker:
             alive.append(track)
         for mi, m in enumerate(measurements):
             if mi not in used and not m.clipped and not self._inside_known(m, alive, measurements):
-                track = Track(self._next_id, m, t_ns, cfg)
+                track = Track(self._next_id, m, t_ns, cfg, self._estimating_height)
                 self._next_id += 1
                 alive.append(track)
                 out.append(track.output(m))
