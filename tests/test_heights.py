@@ -117,14 +117,19 @@ def test_part_height_option_is_validated(scene_dir, capsys):
     assert main([*base, "--part-height", "auto", "--max-frames", "2"]) == 0
 
 
-def test_auto_estimates_a_tall_box_seen_at_a_tilt():
-    # --part-height auto: the box's height free in the outline fit, views combined per track.
-    scene = _box_scene(60, 20)
+@pytest.mark.parametrize("height_mm,tilt_deg", [(10, 0), (20, 20), (60, 20)])
+def test_auto_estimates_a_box_height(height_mm, tilt_deg):
+    """--part-height auto: a new part's height chosen among height_starts_mm by the box model, then
+    each view's own height (a track's height and size lent to its fit), combined per track. From the
+    first third of the crossing on, the height is within 0.5 mm and the pose as good as with the
+    height given. Measured on this scene's other cells it is not always so (the README says so):
+    5 mm at 10 deg comes out 11-13 mm, 20 mm at 10 deg 20.9 mm, a flat part about 3 mm."""
+    scene = _box_scene(height_mm, tilt_deg)
     poses, truths = run_pipeline(scene, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
     heights = [o["height_mm"] for p in poses for o in p["objects"] if o["measured"]]
     assert len(heights) > 40
     third = heights[len(heights) // 3:]
-    assert max(abs(h - 60.0) for h in third) <= 0.5, third
+    assert max(abs(h - height_mm) for h in third) <= 0.5, third
     s = evaluate(poses, truths, skip_first=2).summary()
     assert s["centroid_mean_mm"] <= 0.2 and s["angle_mean_deg"] <= 0.05, s
 

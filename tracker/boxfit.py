@@ -107,12 +107,15 @@ def _best_shades(total: np.ndarray, level: np.ndarray, covered: np.ndarray) -> n
 
 def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows | None, start: Rect,
             height_mm: float, max_rms_px: float, px_per_norm: float, free_height: bool = False,
-            size_prior: SizePrior | None = None, sum_sigma_px: float = 0.1) -> BoxFit | None:
+            size_prior: SizePrior | None = None, sum_sigma_px: float = 0.1,
+            height_prior: tuple[float, float] | None = None) -> BoxFit | None:
     """The footprint (and with ``free_height`` the height, from ``height_mm`` on) whose box best
     explains ``windows``, or None when the fit's RMS residual exceeds ``max_rms_px``. ``points_norm``:
     the edge points (Nx2, normalised) that bring the box near first, and all there is to fit without
     ``windows``; ``px_per_norm``: the focal length. ``size_prior``: the size known from other views,
-    weighed against the sums as if each had noise ``sum_sigma_px``."""
+    weighed against the sums as if each had noise ``sum_sigma_px``; ``height_prior``: (mm, 1-sigma mm)
+    the height known from other views, likewise (with ``free_height``). The height reported is this
+    view's own (the prior taken back out), with its sigma."""
     free = [0, 1, 2, 3, 4, *([_H] if free_height else [])]
     params = np.array([start.x_mm, start.y_mm, start.angle_deg, start.length_mm, start.width_mm, height_mm])
 
@@ -131,13 +134,17 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows | N
     params, r, jac, _ = _robust(outline, params, free, _OUTLINE_ITERATIONS)
     size_cov = None
     if windows is not None:
-        prior = None
+        index, value, sigma = [], [], []
         if size_prior is not None:
             # Start the sums' fit at the known size too: in a flat valley it need not travel far.
-            order = [3, 4] if params[3] >= params[4] else [4, 3]
-            known = np.array([size_prior.length_mm, size_prior.width_mm])
-            params[order] = known
-            prior = (order, known, sum_sigma_px / np.array([size_prior.length_sigma_mm, size_prior.width_sigma_mm]))
+            index = [3, 4] if params[3] >= params[4] else [4, 3]
+            value = [size_prior.length_mm, size_prior.width_mm]
+            sigma = [size_prior.length_sigma_mm, size_prior.width_sigma_mm]
+            params[index] = value
+        if free_height and height_prior is not None:
+            index, value, sigma = [*index, _H], [*value, height_prior[0]], [*sigma, height_prior[1]]
+            params[_H] = height_prior[0]
+        prior = (index, np.array(value), sum_sigma_px / np.array(sigma)) if index else None
         # The outline's edge points lie inside a thin side face's outer edge by (1 - its shade) times its
         # width: from there a fit of the shades finds them near the top's shade, and the edge where
         # the outline put it. Middling shades first bring the box to the middle of that valley.
@@ -149,18 +156,37 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows | N
     if not np.isfinite(params).all() or rms > max_rms_px or min(params[3], params[4]) <= 0:
         return None
     sigma_h = math.inf
+    h = params[_H]
     if free_height and len(jac) > len(free):
-        # The height's variance from the normal matrix, scaled by the residuals' own spread.
-        with np.errstate(all="ignore"):
-            cov = np.linalg.pinv(jac.T @ jac) * rms**2
         k = free.index(_H)
-        sigma_h = float(np.sqrt(max(cov[k, k], 0.0))) if np.isfinite(cov[k, k]) else math.inf
-    x, y, angle, length, width, h = params[: _H + 1]
+        normal = jac.T @ jac
+        # The height's variance from the normal matrix, scaled by the residuals' own spread: this
+        # view's alone.
+        sigma_h = _sigma(normal, k, rms)
+        if windows is not None and height_prior is not None:
+            # This view's own height: the known one taken back out of the fit's, with the variance the
+            # fit had (the known size's rows in). The prior's weight was set against sums of noise
+            # sum_sigma_px; the variance here is scaled by their actual spread.
+            for i, w in zip(prior[0], prior[2], strict=True):
+                if i != _H:
+                    normal[free.index(i), free.index(i)] += w**2
+            sigma_fit = _sigma(normal, k, rms)
+            prior_sigma = height_prior[1] * rms / sum_sigma_px
+            if math.isfinite(sigma_fit):
+                h = h + (sigma_fit / prior_sigma) ** 2 * (h - height_prior[0])
+    x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0
         size_cov = None if size_cov is None else size_cov[::-1, ::-1]
     rect = Rect(float(x), float(y), wrap_angle_deg(float(angle)), float(length), float(width))
     return BoxFit(rect, float(h), sigma_h, float(np.sum(r**2)), rms, size_cov)
+
+
+def _sigma(normal: np.ndarray, k: int, rms: float) -> float:
+    """The 1-sigma uncertainty of parameter ``k`` from a normal matrix, the residuals' spread ``rms``."""
+    with np.errstate(all="ignore"):
+        var = np.linalg.pinv(normal)[k, k] * rms**2
+    return float(np.sqrt(max(var, 0.0))) if np.isfinite(var) else math.inf
 
 
 def _size_covariance(jac: np.ndarray, free: list[int], rms: float) -> np.ndarray:

@@ -107,8 +107,10 @@ class MeasureConfig:
     # box's outline fitted with the height free; views combined per track by their certainty),
     # starting from part_height_mm. What --part-height auto turns on.
     estimate_height: bool = False
-    # Heights (mm) the estimate starts from, the best fit kept.
-    height_starts_mm: tuple = (0.0, 20.0, 60.0)
+    # Heights (mm) a new part's estimate starts from (the box model's best fit kept), and how loosely
+    # its first height is held there (1 sigma, mm) while the view tells its own.
+    height_starts_mm: tuple = (0.0, 5.0, 10.0, 20.0, 40.0, 60.0)
+    height_start_sigma_mm: float = 2.0
     # With a part height: a box outline fitting its edge points worse than this (px RMS) means
     # the part is no box (a cylinder lying down, a bag); its top-face rectangle is kept instead.
     box_max_rms_px: float = 1.0
@@ -131,7 +133,7 @@ class MeasureConfig:
 
     def __post_init__(self) -> None:
         _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "box_max_rms_px",
-                  "touch_min_notch_px", "sum_sigma_px", "square_mm", "box_max_windows")
+                  "touch_min_notch_px", "sum_sigma_px", "square_mm", "box_max_windows", "height_start_sigma_mm")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
         if not 0 <= self.edge_blur_px <= 5:
@@ -155,6 +157,9 @@ class TrackConfig:
     size_sigma_mm: float = 0.1
     # The least uncertainty (1 sigma, mm) a track's size is lent to a box's fit with (see measure.sum_sigma_px).
     known_size_sigma_mm: float = 0.02
+    # ... and a track's estimated height (--part-height auto), 1 sigma mm: loose enough that a view
+    # still tells its own height (taken back out of the fit), tight enough to keep the fit near.
+    known_height_sigma_mm: float = 0.2
     # The least uncertainty (1 sigma, mm) one view's height estimate counts with in a track's.
     view_height_sigma_mm: float = 0.2
     # Process noise: how hard parts may accelerate / turn / change apparent size.

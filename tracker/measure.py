@@ -141,12 +141,16 @@ class Measurer:
                            size_cov_mm2=None if box is None else box.size_cov_mm2)
 
     def _size_prior(self, rect: Rect) -> SizePrior | None:
-        """The size of the known part whose expected centre lies within this blob's rectangle's width."""
-        near = [(math.dist((k.x_mm, k.y_mm), (rect.x_mm, rect.y_mm)), k.size) for k in self._known]
-        near = [(d, size) for d, size in near if d < rect.width_mm / 2]
-        # A near-square part's sides may be taken the other way round: no prior then.
-        return next((size for _, size in sorted(near, key=lambda n: n[0])
-                     if size.length_mm - size.width_mm > self.config.square_mm), None)
+        known = self._known_part(rect)
+        return None if known is None else known.size
+
+    def _known_part(self, rect: Rect) -> KnownPart | None:
+        """The known part whose expected centre lies within this blob's rectangle's width."""
+        near = [(math.dist((k.x_mm, k.y_mm), (rect.x_mm, rect.y_mm)), k) for k in self._known]
+        near = [(d, k) for d, k in near if d < rect.width_mm / 2]
+        # A near-square part's sides may be taken the other way round: none then.
+        return next((k for _, k in sorted(near, key=lambda n: n[0])
+                     if k.size.length_mm - k.size.width_mm > self.config.square_mm), None)
 
     def _window(self, bbox) -> tuple[int, int, int, int]:
         """The pixels examined for a blob's edges: its bounding box and a margin (x0, y0, x1, y1)."""
@@ -176,14 +180,25 @@ class Measurer:
             return fit_box(self._box_camera, self.mapper.to_norm(edges.points_px), self._windows(edges), rect,
                            cfg.part_height_mm, cfg.box_max_rms_px, self._focal_px,
                            size_prior=self._size_prior(rect), sum_sigma_px=cfg.sum_sigma_px)
-        # The height is found from several starts: from a flat start the fit may stay flat (a
-        # larger flat rectangle explains a box's silhouette almost as well). Only the outline is
-        # fitted: a thin side face's shade and its width (so the height) trade off in the sums.
         points = self.mapper.to_norm(edges.points_px)
-        fits = [fit_box(self._box_camera, points, None, rect, h, cfg.box_max_rms_px, self._focal_px,
-                        free_height=True) for h in cfg.height_starts_mm]
+        windows = self._windows(edges)
+        known = self._known_part(rect)
+        if known is not None and known.height_mm is not None:
+            # A part tracked so far: its height and size as known, this view's own height reported.
+            return fit_box(self._box_camera, points, windows, rect, known.height_mm, cfg.box_max_rms_px,
+                           self._focal_px, free_height=True, size_prior=known.size, sum_sigma_px=cfg.sum_sigma_px,
+                           height_prior=(known.height_mm, known.height_sigma_mm))
+        # A new part: each height of height_starts_mm tried with the box model, the one whose sums fit
+        # best kept, its view's own height from there.
+        fits = [fit_box(self._box_camera, points, windows, rect, h, cfg.box_max_rms_px, self._focal_px)
+                for h in cfg.height_starts_mm]
         fits = [f for f in fits if f is not None]
-        return min(fits, key=lambda f: f.cost) if fits else None
+        if not fits:
+            return None
+        best = min(fits, key=lambda f: f.cost)
+        return fit_box(self._box_camera, points, windows, best.rect, best.height_mm, cfg.box_max_rms_px,
+                       self._focal_px, free_height=True, height_prior=(best.height_mm, cfg.height_start_sigma_mm),
+                       sum_sigma_px=cfg.sum_sigma_px) or best
 
     def _edge_points(self, frame, reference, contour, bbox, blocked=None) -> _Edges | None:
         """Sub-pixel edge points (Nx2 px); ``blocked``: window pixels of other parts, which no edge's
@@ -245,6 +260,9 @@ class KnownPart:
     x_mm: float
     y_mm: float
     size: SizePrior
+    # Its height as estimated so far (mm, 1 sigma), None when given or not yet estimated.
+    height_mm: float | None = None
+    height_sigma_mm: float = math.inf
 
 
 @dataclass(frozen=True)

@@ -99,7 +99,7 @@ class Pipeline:
 
     def _known(self, t_ns: int) -> list:
         """The tracked parts where they are expected now, in the world frame (boxes lean on their sizes)."""
-        if self.config.measure.part_height_mm <= 0 or self.config.measure.estimate_height:
+        if self.config.measure.part_height_mm <= 0 and not self.config.measure.estimate_height:
             return []
         ox, oy = self._belt_offset_mm
         return [dataclasses.replace(k, x_mm=k.x_mm + ox, y_mm=k.y_mm + oy) for k in self.tracker.known(t_ns)]

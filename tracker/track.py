@@ -137,7 +137,11 @@ class Track:
         """Where the part is expected (as last predicted) and its size as known so far."""
         x = self.kf.x[:, 0]
         sigma = np.sqrt(np.maximum(np.diag(self.kf.P)[[LENGTH, WIDTH]], cfg.known_size_sigma_mm**2))
-        return KnownPart(float(x[X]), float(x[Y]), SizePrior(float(x[LENGTH]), float(x[WIDTH]), *map(float, sigma)))
+        size = SizePrior(float(x[LENGTH]), float(x[WIDTH]), *map(float, sigma))
+        if self._height_weight <= 0:
+            return KnownPart(float(x[X]), float(x[Y]), size)
+        height_sigma = max(self._height_weight**-0.5, cfg.known_height_sigma_mm)
+        return KnownPart(float(x[X]), float(x[Y]), size, self._height_sum / self._height_weight, height_sigma)
 
     def _normalise(self) -> None:
         """Keep the angle in (-90, 90] and the length the longer side (180 deg symmetry)."""
