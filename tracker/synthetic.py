@@ -88,8 +88,9 @@ class PartSpec:
     intensity: float = 200.0
     # Height of its bottom face above the belt: a part lying on another one, or a bracket over the belt.
     z_mm: float = 0.0
-    # "box", or "cylinder": lying down along its length, width_mm across (height_mm is ignored). A part
-    # that is no prism, for the limits of the box model.
+    # "box"; "cylinder": lying down along its length, width_mm across (height_mm is ignored);
+    # "bag": a soft pouch, an ellipsoid of these length, width and height lying on the belt. Parts
+    # that are no prism, for the limits of the box model.
     shape: str = "box"
 
     def pose(self, t_s: float) -> tuple[float, float, float]:
@@ -178,6 +179,8 @@ class Renderer:
         dz = rays[..., 2]
         if part.shape == "cylinder":
             return self._cylinder_hits(part, (ox, oy, oz), (dx, dy, dz))
+        if part.shape == "bag":
+            return self._bag_hits(part, (ox, oy, oz), (dx, dy, dz))
         with np.errstate(divide="ignore", invalid="ignore"):
             near, far = [], []
             for o_i, d_i, lo, hi in (
@@ -218,6 +221,25 @@ class Renderer:
         hit = (disc > 0) & (t_in <= t_out) & (t_out > 0)
         facing_up = (oz + t1 * dz - zc) / r < -0.7
         face = np.where(t1 >= tx_near, np.where(facing_up, 1, 2), 3)
+        return np.where(hit, face, 0).astype(np.uint8)
+
+    @staticmethod
+    def _bag_hits(part: PartSpec, o: tuple, d: tuple) -> np.ndarray:
+        """An ellipsoid lying on the belt: 1 where the ray meets its upper half, 2 its flanks facing the
+        part's x, 3 those facing its y (a soft object's shading, in bands like a box's faces)."""
+        semi = (part.length_mm / 2, part.width_mm / 2, part.height_mm / 2)
+        zc = -part.z_mm - semi[2]  # its centre (world Z points into the belt)
+        # In units of its semi-axes the ellipsoid is the unit sphere.
+        ox, oy, oz = o[0] / semi[0], o[1] / semi[1], (o[2] - zc) / semi[2]
+        dx, dy, dz = d[0] / semi[0], d[1] / semi[1], d[2] / semi[2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a = dx * dx + dy * dy + dz * dz
+            b = 2 * (ox * dx + oy * dy + oz * dz)
+            disc = b * b - 4 * a * (ox * ox + oy * oy + oz * oz - 1.0)
+            t = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2 * a)
+        hit = (disc > 0) & (t > 0)
+        px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
+        face = np.where(pz < -0.7, 1, np.where(np.abs(px) > np.abs(py), 2, 3))
         return np.where(hit, face, 0).astype(np.uint8)
 
     def _roi(self, part: PartSpec, poses: list[tuple[float, float, float]]) -> tuple[int, int, int, int] | None:
