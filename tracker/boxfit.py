@@ -7,8 +7,7 @@ shades (a side face's contrast as a fraction of the top's: one for the faces at 
 one for those along it) are solved for every box pose tried (variable projection: they are nearly
 linear, and left free beside the pose they open long curved valleys that stop the fit short). The
 box is first brought near with its plain outline against the edge points. A fit that does not
-explain the data (a part that is no prism: a bag) is rejected, and the caller keeps the plain
-rectangle.
+explain the data (a part no box at all) is rejected, and the caller keeps the plain rectangle.
 """
 
 from __future__ import annotations
@@ -74,10 +73,9 @@ class SizePrior:
 
 
 def predicted_sums(camera: BoxCamera, windows: EdgeWindows, params: np.ndarray,
-                   shades: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   shades: np.ndarray | None = None) -> np.ndarray:
     """The coverage sums each box (P rows of ``params``) predicts for ``windows`` (P, N; px) with the
-    side ``shades`` (end faces, long faces), or with the shades that explain the sums best (None);
-    and the shades (P, 2)."""
+    side ``shades`` (end faces, long faces), or with the shades that explain the sums best (None)."""
     polygons, kinds = camera.faces(params)
     onehot = np.eye(3)[kinds]  # face -> kind
     total, level = (lengths @ onehot for lengths in lengths_in_faces(windows, polygons))
@@ -85,8 +83,7 @@ def predicted_sums(camera: BoxCamera, windows: EdgeWindows, params: np.ndarray,
         shades = _best_shades(total, level, windows.covered_px)
     s = np.concatenate([np.ones((len(total), 1)), np.broadcast_to(shades, (len(total), 2))], axis=1)
     # The level pixel outside the part (a window across a corner) is an outlier, not a division by 0.
-    predicted = np.einsum("pnk,pk->pn", total, s) / np.maximum(np.einsum("pnk,pk->pn", level, s), _MIN_LEVEL)
-    return predicted, np.broadcast_to(shades, (len(total), 2))
+    return np.einsum("pnk,pk->pn", total, s) / np.maximum(np.einsum("pnk,pk->pn", level, s), _MIN_LEVEL)
 
 
 def _best_shades(total: np.ndarray, level: np.ndarray, covered: np.ndarray) -> np.ndarray:
@@ -105,17 +102,17 @@ def _best_shades(total: np.ndarray, level: np.ndarray, covered: np.ndarray) -> n
     return shades
 
 
-def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows | None, start: Rect,
+def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, start: Rect,
             height_mm: float, max_rms_px: float, px_per_norm: float, free_height: bool = False,
             size_prior: SizePrior | None = None, sum_sigma_px: float = 0.1,
             height_prior: tuple[float, float] | None = None) -> BoxFit | None:
     """The footprint (and with ``free_height`` the height, from ``height_mm`` on) whose box best
     explains ``windows``, or None when the fit's RMS residual exceeds ``max_rms_px``. ``points_norm``:
-    the edge points (Nx2, normalised) that bring the box near first, and all there is to fit without
-    ``windows``; ``px_per_norm``: the focal length. ``size_prior``: the size known from other views,
-    weighed against the sums as if each had noise ``sum_sigma_px``; ``height_prior``: (mm, 1-sigma mm)
-    the height known from other views, likewise (with ``free_height``). The height reported is this
-    view's own (the prior taken back out), with its sigma."""
+    the edge points (Nx2, normalised) that bring the box near first; ``px_per_norm``: the focal
+    length. ``size_prior``: the size known from other views, weighed against the sums as if each had
+    noise ``sum_sigma_px``; ``height_prior``: (mm, 1-sigma mm) the height known from other views,
+    likewise (with ``free_height``). The height reported is this view's own (the prior taken back
+    out), with its sigma."""
     free = [0, 1, 2, 3, 4, *([_H] if free_height else [])]
     params = np.array([start.x_mm, start.y_mm, start.angle_deg, start.length_mm, start.width_mm, height_mm])
 
@@ -126,60 +123,63 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows | N
 
     def sums(p: np.ndarray, which: np.ndarray | slice = slice(None), shades: np.ndarray | None = None) -> np.ndarray:
         w = windows if isinstance(which, slice) else windows.subset(which)
-        return w.covered_px - predicted_sums(camera, w, p, shades)[0]
+        return w.covered_px - predicted_sums(camera, w, p, shades)
 
     def middling(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
         return sums(p, which, np.full(2, _SHADE_START))
 
     params, r, jac, _ = _robust(outline, params, free, _OUTLINE_ITERATIONS)
-    size_cov = None
-    if windows is not None:
-        index, value, sigma = [], [], []
-        if size_prior is not None:
-            # Start the sums' fit at the known size too: in a flat valley it need not travel far.
-            index = [3, 4] if params[3] >= params[4] else [4, 3]
-            value = [size_prior.length_mm, size_prior.width_mm]
-            sigma = [size_prior.length_sigma_mm, size_prior.width_sigma_mm]
-            params[index] = value
-        if free_height and height_prior is not None:
-            index, value, sigma = [*index, _H], [*value, height_prior[0]], [*sigma, height_prior[1]]
-            params[_H] = height_prior[0]
-        prior = (index, np.array(value), sum_sigma_px / np.array(sigma)) if index else None
-        # The outline's edge points lie inside a thin side face's outer edge by (1 - its shade) times its
-        # width: from there a fit of the shades finds them near the top's shade, and the edge where
-        # the outline put it. Middling shades first bring the box to the middle of that valley.
-        params, r, jac, keep = _robust(middling, params, free, _SUM_ITERATIONS, prior)
-        params, r, jac = _least_squares(lambda p: sums(p, keep), params, free, _SUM_ITERATIONS, prior)
+    index, value, sigma = [], [], []
+    if size_prior is not None:
+        # Start the sums' fit at the known size too: in a flat valley it need not travel far.
+        index = [3, 4] if params[3] >= params[4] else [4, 3]
+        value = [size_prior.length_mm, size_prior.width_mm]
+        sigma = [size_prior.length_sigma_mm, size_prior.width_sigma_mm]
+        params[index] = value
+    if free_height and height_prior is not None:
+        index, value, sigma = [*index, _H], [*value, height_prior[0]], [*sigma, height_prior[1]]
+        params[_H] = height_prior[0]
+    prior = (index, np.array(value), sum_sigma_px / np.array(sigma)) if index else None
+    # The outline's edge points lie inside a thin side face's outer edge by (1 - its shade) times its
+    # width: from there a fit of the shades finds them near the top's shade, and the edge where
+    # the outline put it. Middling shades first bring the box to the middle of that valley.
+    params, r, jac, keep = _robust(middling, params, free, _SUM_ITERATIONS, prior)
+    params, r, jac = _least_squares(lambda p: sums(p, keep), params, free, _SUM_ITERATIONS, prior)
     rms = float(np.sqrt(np.mean(r**2))) if len(r) else math.inf
-    if windows is not None and len(r) > len(free):
-        size_cov = _size_covariance(jac, free, rms)
+    size_cov = _size_covariance(jac, free, rms) if len(r) > len(free) else None
     if not np.isfinite(params).all() or rms > max_rms_px or min(params[3], params[4]) <= 0:
         return None
-    sigma_h = math.inf
-    h = params[_H]
+    h, sigma_h = params[_H], math.inf
     if free_height and len(jac) > len(free):
-        k = free.index(_H)
-        normal = jac.T @ jac
-        # The height's variance from the normal matrix, scaled by the residuals' own spread: this
-        # view's alone.
-        sigma_h = _sigma(normal, k, rms)
-        if windows is not None and height_prior is not None:
-            # This view's own height: the known one taken back out of the fit's, with the variance the
-            # fit had (the known size's rows in). The prior's weight was set against sums of noise
-            # sum_sigma_px; the variance here is scaled by their actual spread.
-            for i, w in zip(prior[0], prior[2], strict=True):
-                if i != _H:
-                    normal[free.index(i), free.index(i)] += w**2
-            sigma_fit = _sigma(normal, k, rms)
-            prior_sigma = height_prior[1] * rms / sum_sigma_px
-            if math.isfinite(sigma_fit):
-                h = h + (sigma_fit / prior_sigma) ** 2 * (h - height_prior[0])
+        h, sigma_h = _view_height(jac, free, params[_H], rms, prior, height_prior, sum_sigma_px)
     x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0
         size_cov = None if size_cov is None else size_cov[::-1, ::-1]
     rect = Rect(float(x), float(y), wrap_angle_deg(float(angle)), float(length), float(width))
     return BoxFit(rect, float(h), sigma_h, float(np.sum(r**2)), rms, size_cov)
+
+
+def _view_height(jac: np.ndarray, free: list[int], fitted_mm: float, rms: float, prior: tuple | None,
+                 height_prior: tuple[float, float] | None, sum_sigma_px: float) -> tuple[float, float]:
+    """This view's own height and its 1 sigma (mm), from a fit's Jacobian and its height."""
+    k = free.index(_H)
+    normal = jac.T @ jac
+    # The variance from the normal matrix, scaled by the residuals' own spread: this view's alone.
+    sigma = _sigma(normal, k, rms)
+    if prior is None or height_prior is None:
+        return fitted_mm, sigma
+    # The known height taken back out of the fit's, with the variance the fit had (the known size's
+    # rows in). The prior's weight was set against sums of noise sum_sigma_px; the variance here is
+    # scaled by their actual spread.
+    for i, w in zip(prior[0], prior[2], strict=True):
+        if i != _H:
+            normal[free.index(i), free.index(i)] += w**2
+    sigma_fit = _sigma(normal, k, rms)
+    prior_sigma = height_prior[1] * rms / sum_sigma_px
+    if not math.isfinite(sigma_fit):
+        return fitted_mm, sigma
+    return fitted_mm + (sigma_fit / prior_sigma) ** 2 * (fitted_mm - height_prior[0]), sigma
 
 
 def _sigma(normal: np.ndarray, k: int, rms: float) -> float:
