@@ -103,9 +103,9 @@ class MeasureConfig:
     side_band_px: float = 1.5
     # Minimum |part - belt| contrast (grey levels) for a sub-pixel measurement.
     min_contrast: float = 20.0
-    # Estimate each part's height from how its silhouette changes as it crosses the view (the
-    # box's outline fitted with the height free; views combined per track by their certainty),
-    # starting from part_height_mm. What --part-height auto turns on.
+    # Estimate each part's height from how its silhouette changes as it crosses the view (the box
+    # model fitted with the height free, each view lent its track's size and height; views combined
+    # per track by their certainty). What --part-height auto turns on; experimental (README).
     estimate_height: bool = False
     # Heights (mm) a new part's estimate starts from (the box model's best fit kept), and how loosely
     # its first height is held there (1 sigma, mm) while the view tells its own.

@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 import cv2
 import numpy as np
+from filterpy.kalman import KalmanFilter
 
 from tracker.boxfit import SizePrior
 from tracker.config import TrackConfig
@@ -177,7 +178,7 @@ class Track:
         return t_ns - self.seen_ns > cfg.max_coast_s * 1e9
 
 
-def _filter_from(m: Measurement, cfg: TrackConfig):
+def _filter_from(m: Measurement, cfg: TrackConfig) -> KalmanFilter:
     """A filter started at measurement ``m``: its size as sure as its view made it (see BoxFit)."""
     r = m.rect
     kf = make_filter(np.array([r.x_mm, r.y_mm, r.angle_deg, r.length_mm, r.width_mm]), cfg)
