@@ -5,7 +5,7 @@
 Prints a Markdown table (the README's "Parts with height" figures come from it). The scenes are
 not the tests' (other cameras, part sizes, shades, paths and speeds): boxes 5, 10, 20 and 60 mm
 tall crossing the whole view while turning, under cameras tilted 0, 10 and 20 deg, and a pair of
-parts of different heights at once. For auto, the height and centroid errors are split into the
+parts of different heights at once, and a flat part. For auto, the height and centroid errors are split into the
 frames before and after the track says its height has converged. The last column is the
 measurement stage's own time per frame (one part in view), with the height given and flat, in
 the same run.
@@ -85,6 +85,8 @@ def auto_errors(poses: list[dict], truths: list[dict]) -> dict:
 
 def measure_all(quick: bool = False) -> list[dict]:
     cases = [(f"{h:g} mm box, {t:g} deg tilt", box_scene(h, t), h) for h in HEIGHTS_MM for t in TILTS_DEG]
+    # A flat part: what auto makes of it (given and flat are the same here).
+    cases += [(f"flat part, {t:g} deg tilt", box_scene(0.0, t), 0.0) for t in (0.0, 20.0)]
     cases.append(("20 mm and 8 mm boxes at once, 15 deg tilt", pair_scene(), None))
     if quick:
         cases = cases[::4]

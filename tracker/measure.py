@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from tracker.box import BoxCamera, EdgeWindows, compile_model
-from tracker.boxfit import BoxFit, SizePrior, fit_box
+from tracker.boxfit import BoxFit, SizePrior, fit_box, predicted_sums
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
 from tracker.split import SplitRule, split_blob
@@ -27,6 +27,9 @@ from tracker.undistort import BeltMapper
 
 # Pixels on each side of a crossing that the coverage sum spans (covers blur up to ~4 px).
 HALF_WINDOW_PX = 3
+# Windows a box's fit leaves out when it is compared with the flat rectangle: beyond this many median
+# residuals (as the fit itself judges outliers).
+_OUTLIER_FACTOR = 4.0
 # A row crossing is used where |d/dx| >= this * |d/dy| (edge within ~63 deg of vertical).
 _STEEP_RATIO = 0.5
 _ERODE = cv2.getStructuringElement(cv2.MORPH_RECT, (5, 5))
@@ -54,6 +57,11 @@ class Measurement:
     # A box's fit: how well this view alone decides the size (covariance of length and width, mm^2,
     # see BoxFit); None where the size is as sure as any.
     size_cov_mm2: np.ndarray | None = field(default=None, compare=False)
+    # --part-height auto: the same blob measured as flat, and how well each explains its edges (sums
+    # of squared window residuals, px^2, over the same windows): the track decides whether it is a box.
+    flat_rect: Rect | None = None
+    flat_cost_px2: float = 0.0
+    box_cost_px2: float = 0.0
 
 
 class Measurer:
@@ -117,6 +125,7 @@ class Measurer:
             return None
         edges = box = None
         height: tuple[float | None, float] = (None, math.inf)
+        flat: tuple[Rect | None, float, float] = (None, 0.0, 0.0)
         if cfg.subpixel and not clipped:
             edges = self._edge_points(frame, reference, contour, (x, y, w, h), others)
         if edges is None or len(edges.points_px) < 12:
@@ -131,14 +140,28 @@ class Measurer:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
                 box = self._fit_box(edges, rect)
                 if box is not None:
-                    rect = box.rect
                     if cfg.estimate_height:
                         height = (box.height_mm, box.height_sigma_mm)
+                        flat = (rect, *self._costs(edges, rect, box))
+                    rect = box.rect
         centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
         # Another part within reach of its edges touches it, or nearly: not a pick (contract 4b).
         return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px), *height,
                            pickable=others is None, piece=piece,
-                           size_cov_mm2=None if box is None else box.size_cov_mm2)
+                           size_cov_mm2=None if box is None else box.size_cov_mm2, flat_rect=flat[0],
+                           flat_cost_px2=flat[1], box_cost_px2=flat[2])
+
+    def _costs(self, edges: _Edges, flat: Rect, box: BoxFit) -> tuple[float, float]:
+        """How well the flat rectangle and the box explain the edge windows: sums of squared residuals
+        (px^2) over the windows the box explains (its outliers, a corner or a speck, left out of both).
+        The flat rectangle is the plain measurement's, not fitted again: a flat fit of the same freedom
+        explains a thin box's edges about as well, and would take most thin boxes for flat."""
+        windows = self._windows(edges)
+        boxes = np.array([[*_rect_params(box.rect), box.height_mm], [*_rect_params(flat), 0.0]])
+        r = windows.covered_px - np.concatenate([predicted_sums(self._box_camera, windows, boxes[:1]),
+                                                 predicted_sums(self._box_camera, windows, boxes[1:])])
+        keep = np.abs(r[0]) <= _OUTLIER_FACTOR * max(float(np.median(np.abs(r[0]))), 1e-3)
+        return float(np.sum(r[1, keep] ** 2)), float(np.sum(r[0, keep] ** 2))
 
     def _size_prior(self, rect: Rect) -> SizePrior | None:
         known = self._known_part(rect)
@@ -274,6 +297,10 @@ class _Edges:
     cols: _Crossings  # transposed: their "rows" are columns
     origin: tuple[int, int]  # the examined window's first pixel (x0, y0)
     levels: tuple  # the part's level each set of windows was read against (per window, or one)
+
+
+def _rect_params(rect: Rect) -> tuple[float, float, float, float, float]:
+    return rect.x_mm, rect.y_mm, rect.angle_deg, rect.length_mm, rect.width_mm
 
 
 def _overlap(window: tuple[int, int, int, int], box: tuple[int, int, int, int]) -> bool:

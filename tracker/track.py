@@ -53,6 +53,9 @@ class Track:
         self._estimating_height = estimating_height
         self._height_floor_mm = cfg.view_height_sigma_mm
         self._height_views = 0
+        # --part-height auto: how much better than flat a box explains each view's edges (a fraction).
+        self._box_gains: list[float] = []
+        self._min_box_gain = cfg.height_min_box_gain
         self._add_height(m)
 
     def _add_height(self, m: Measurement) -> None:
@@ -62,6 +65,16 @@ class Track:
             self._height_views += 1
             self._height_weight += w
             self._height_sum += w * m.height_mm
+            if m.flat_cost_px2 > 0:
+                self._box_gains.append(1.0 - m.box_cost_px2 / m.flat_cost_px2)
+
+    @property
+    def flat(self) -> bool:
+        """An estimated height whose box explains the views no better than a flat part: it is flat."""
+        if not self._estimating_height or len(self._box_gains) < self._converged_views:
+            return False
+        # The median view: a box fit gone astray in one view (flat far better) does not decide it.
+        return float(np.median(self._box_gains)) < self._min_box_gain
 
     @property
     def position(self) -> np.ndarray:
@@ -111,7 +124,8 @@ class Track:
         self.size_var_mm2 = (1 - a) * self.size_var_mm2 + a * float(np.mean(self._size_residuals(m) ** 2))
         self._add_height(m)
         self.pickable = m.pickable
-        r = m.rect
+        # A part found flat is measured as flat (the exact rectangle, not a box's with a made-up height).
+        r = m.flat_rect if self.flat and m.flat_rect is not None else m.rect
         predicted = float(self.kf.x[ANGLE, 0])
         # The rectangle's two axes are both candidates for the tracked "long side":
         # take the one nearer the prediction, so near-square parts do not flip by 90 deg.
@@ -141,6 +155,9 @@ class Track:
         size = SizePrior(float(x[LENGTH]), float(x[WIDTH]), *map(float, sigma))
         if self._height_weight <= 0:
             return KnownPart(float(x[X]), float(x[Y]), size)
+        if self.flat:
+            # Its views still tell their own height, from a box of none.
+            return KnownPart(float(x[X]), float(x[Y]), size, 0.0, cfg.known_height_sigma_mm)
         height_sigma = max(self._height_weight**-0.5, cfg.known_height_sigma_mm)
         return KnownPart(float(x[X]), float(x[Y]), size, self._height_sum / self._height_weight, height_sigma)
 
@@ -160,7 +177,7 @@ class Track:
         corners = rectangle_corners(x[X], x[Y], x[ANGLE], x[LENGTH], x[WIDTH])
         height, converged = 0.0, not self._estimating_height
         if self._height_weight > 0:
-            height = self._height_sum / self._height_weight
+            height = 0.0 if self.flat else self._height_sum / self._height_weight
             converged = (self._height_weight ** -0.5 < self._converged_sigma_mm
                          and self._height_views >= self._converged_views)
         return TrackedObject(
