@@ -138,11 +138,12 @@ class Measurer:
             rect = refine_rect(pts_mm, min_area_rect(pts_mm), band=cfg.side_band_px * self._mm_per_px)
             if self._boxes:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
-                box = self._fit_box(edges, rect)
+                windows = self._windows(edges)
+                box = self._fit_box(edges, windows, rect)
                 if box is not None:
                     if cfg.estimate_height:
                         height = (box.height_mm, box.height_sigma_mm)
-                        flat = (rect, *self._costs(edges, rect, box))
+                        flat = (rect, *self._costs(windows, rect, box))
                     rect = box.rect
         centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
         # Another part within reach of its edges touches it, or nearly: not a pick (contract 4b).
@@ -151,12 +152,11 @@ class Measurer:
                            size_cov_mm2=None if box is None else box.size_cov_mm2, flat_rect=flat[0],
                            flat_cost_px2=flat[1], box_cost_px2=flat[2])
 
-    def _costs(self, edges: _Edges, flat: Rect, box: BoxFit) -> tuple[float, float]:
+    def _costs(self, windows: EdgeWindows, flat: Rect, box: BoxFit) -> tuple[float, float]:
         """How well the flat rectangle and the box explain the edge windows: sums of squared residuals
         (px^2) over the windows the box explains (its outliers, a corner or a speck, left out of both).
         The flat rectangle is the plain measurement's, not fitted again: a flat fit of the same freedom
         explains a thin box's edges about as well, and would take most thin boxes for flat."""
-        windows = self._windows(edges)
         boxes = np.array([[*_rect_params(box.rect), box.height_mm], [*_rect_params(flat), 0.0]])
         r = windows.covered_px - np.concatenate([predicted_sums(self._box_camera, windows, boxes[:1]),
                                                  predicted_sums(self._box_camera, windows, boxes[1:])])
@@ -197,14 +197,13 @@ class Measurer:
             return None
         return blocked > 0
 
-    def _fit_box(self, edges: _Edges, rect: Rect) -> BoxFit | None:
+    def _fit_box(self, edges: _Edges, windows: EdgeWindows, rect: Rect) -> BoxFit | None:
         cfg = self.config
         if not cfg.estimate_height:
-            return fit_box(self._box_camera, self.mapper.to_norm(edges.points_px), self._windows(edges), rect,
+            return fit_box(self._box_camera, self.mapper.to_norm(edges.points_px), windows, rect,
                            cfg.part_height_mm, cfg.box_max_rms_px, self._focal_px,
                            size_prior=self._size_prior(rect), sum_sigma_px=cfg.sum_sigma_px)
         points = self.mapper.to_norm(edges.points_px)
-        windows = self._windows(edges)
         known = self._known_part(rect)
         if known is not None and known.height_mm is not None:
             # A part tracked so far: its height and size as known, this view's own height reported.
