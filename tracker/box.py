@@ -128,20 +128,12 @@ def _footprints(params: np.ndarray) -> np.ndarray:
 def distances_to_outline(points: np.ndarray, outline: np.ndarray) -> np.ndarray:
     """Signed distance of each point to the nearest edge of a convex polygon (outside positive),
     so that a least-squares fit sees on which side of the outline each point lies: shape (N,)."""
-    a = outline
-    b = np.roll(outline, -1, axis=0)
-    ab = b - a  # (K, 2)
-    ap = points[:, None, :] - a[None, :, :]  # (N, K, 2)
-    t = np.clip((ap * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-30), 0.0, 1.0)
-    nearest = a[None] + t[..., None] * ab[None]
-    dist = np.sqrt(((points[:, None, :] - nearest) ** 2).sum(-1))
-    k = dist.argmin(axis=1)
-    rows = np.arange(len(points))
-    cross = ab[k, 0] * ap[rows, k, 1] - ab[k, 1] * ap[rows, k, 0]
-    # The polygon's orientation decides which side of an edge is outside.
-    area2 = float(np.sum(a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1]))
-    sign = np.where(cross * area2 > 0, -1.0, 1.0)
-    return sign * dist[rows, k]
+    from tracker.facecover import outline_distances  # noqa: PLC0415 (compiled: see lengths_in_faces)
+
+    out = np.empty(len(points))
+    outline_distances(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(outline, dtype=np.float64),
+                      out)
+    return out
 
 
 def lengths_in_faces(windows: EdgeWindows, polygons: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -172,3 +164,4 @@ def compile_model() -> None:
     lengths_in_faces(windows, square)
     lengths_in_faces(EdgeWindows(windows.inner_norm, windows.step_norm, windows.covered_px, 6.0, (1.0, 2.0), 1.0),
                      square)
+    distances_to_outline(np.zeros((1, 2)), square[0, 0])
