@@ -18,12 +18,13 @@ hull of the 8 corners, against the edge points).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
 
 from tracker.calibration import Calibration
+from tracker.geometry import rectangle_corners
 
 # Face kinds: the top, the sides facing the part's own x (its ends) and those facing its y.
 TOP, SIDE_X, SIDE_Y = 0, 1, 2
@@ -118,11 +119,7 @@ class BoxCamera:
 
 def _footprints(params: np.ndarray) -> np.ndarray:
     """rectangle_corners of each row's (x, y, angle, length, width): (P, 4, 2), counter-clockwise."""
-    a = np.radians(params[:, 2])
-    u = np.stack([np.cos(a), np.sin(a)], axis=1) * params[:, 3:4] / 2
-    v = np.stack([-np.sin(a), np.cos(a)], axis=1) * params[:, 4:5] / 2
-    c = params[:, None, :2]
-    return np.stack([c[:, 0] - u - v, c[:, 0] + u - v, c[:, 0] + u + v, c[:, 0] - u + v], axis=1)
+    return np.stack([rectangle_corners(*row[:5]) for row in params])
 
 
 def distances_to_outline(points: np.ndarray, outline: np.ndarray) -> np.ndarray:
@@ -162,6 +159,5 @@ def compile_model() -> None:
     windows = EdgeWindows(np.zeros((1, 2)), np.array([[1.0, 0.0]]), np.zeros(1), 6.0, (1.0, 2.0))
     square = np.array([[[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]]])
     lengths_in_faces(windows, square)
-    lengths_in_faces(EdgeWindows(windows.inner_norm, windows.step_norm, windows.covered_px, 6.0, (1.0, 2.0), 1.0),
-                     square)
+    lengths_in_faces(replace(windows, blur_px=1.0), square)  # the blurred path is compiled apart
     distances_to_outline(np.zeros((1, 2)), square[0, 0])

@@ -114,7 +114,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     likewise (with ``free_height``). The height reported is this view's own (the prior taken back
     out), with its sigma."""
     free = [0, 1, 2, 3, 4, *([_H] if free_height else [])]
-    params = np.array([start.x_mm, start.y_mm, start.angle_deg, start.length_mm, start.width_mm, height_mm])
+    params = box_params(start, height_mm)
 
     # Each takes boxes (P rows of parameters) and gives their residuals (P, N) over the rows ``which``.
     def outline(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
@@ -196,6 +196,16 @@ def _size_covariance(jac: np.ndarray, free: list[int], rms: float) -> np.ndarray
     return (np.linalg.pinv(jac.T @ jac) * rms**2)[np.ix_(size, size)]
 
 
+def inliers(residuals: np.ndarray) -> np.ndarray:
+    """The residuals that are no outliers (a corner's windows, a speck): within a few median residuals."""
+    return np.abs(residuals) <= _OUTLIER_FACTOR * max(float(np.median(np.abs(residuals))), 1e-3)
+
+
+def box_params(rect: Rect, height_mm: float) -> np.ndarray:
+    """A box's parameters as the fit orders them: x, y, angle, length, width, height."""
+    return np.array([rect.x_mm, rect.y_mm, rect.angle_deg, rect.length_mm, rect.width_mm, height_mm])
+
+
 def _robust(residuals, params: np.ndarray, free: list[int], iterations: int,
             prior: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | slice]:
     """Least squares, then again without the outliers (a corner's windows, a speck). They are
@@ -203,7 +213,7 @@ def _robust(residuals, params: np.ndarray, free: list[int], iterations: int,
     and left free to drift. ``residuals(params, which)``: the residuals (px) of the rows ``which``;
     ``prior``: see _least_squares. Returns the last's params, residuals and Jacobian, and the rows kept."""
     params, r, jac = _least_squares(residuals, params, free, iterations, prior)
-    keep = np.abs(r) <= _OUTLIER_FACTOR * max(float(np.median(np.abs(r))), 1e-3)
+    keep = inliers(r)
     if keep.all():
         return params, r, jac, slice(None)
     return (*_least_squares(lambda p: residuals(p, keep), params, free, iterations, prior), keep)

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from tracker.box import BoxCamera, EdgeWindows, compile_model
-from tracker.boxfit import BoxFit, SizePrior, fit_box, predicted_sums
+from tracker.boxfit import BoxFit, SizePrior, box_params, fit_box, inliers, predicted_sums
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
 from tracker.split import SplitRule, split_blob
@@ -27,9 +27,6 @@ from tracker.undistort import BeltMapper
 
 # Pixels on each side of a crossing that the coverage sum spans (covers blur up to ~4 px).
 HALF_WINDOW_PX = 3
-# Windows a box's fit leaves out when it is compared with the flat rectangle: beyond this many median
-# residuals (as the fit itself judges outliers).
-_OUTLIER_FACTOR = 4.0
 # A row crossing is used where |d/dx| >= this * |d/dy| (edge within ~63 deg of vertical).
 _STEEP_RATIO = 0.5
 _ERODE = cv2.getStructuringElement(cv2.MORPH_RECT, (5, 5))
@@ -157,10 +154,10 @@ class Measurer:
         (px^2) over the windows the box explains (its outliers, a corner or a speck, left out of both).
         The flat rectangle is the plain measurement's, not fitted again: a flat fit of the same freedom
         explains a thin box's edges about as well, and would take most thin boxes for flat."""
-        boxes = np.array([[*_rect_params(box.rect), box.height_mm], [*_rect_params(flat), 0.0]])
-        r = windows.covered_px - np.concatenate([predicted_sums(self._box_camera, windows, boxes[:1]),
-                                                 predicted_sums(self._box_camera, windows, boxes[1:])])
-        keep = np.abs(r[0]) <= _OUTLIER_FACTOR * max(float(np.median(np.abs(r[0]))), 1e-3)
+        # Each with its own side shades (a flat one has none).
+        r = windows.covered_px - np.concatenate([predicted_sums(self._box_camera, windows, box_params(b, h)[None])
+                                                 for b, h in ((box.rect, box.height_mm), (flat, 0.0))])
+        keep = inliers(r[0])
         return float(np.sum(r[1, keep] ** 2)), float(np.sum(r[0, keep] ** 2))
 
     def _size_prior(self, rect: Rect) -> SizePrior | None:
@@ -296,10 +293,6 @@ class _Edges:
     cols: _Crossings  # transposed: their "rows" are columns
     origin: tuple[int, int]  # the examined window's first pixel (x0, y0)
     levels: tuple  # the part's level each set of windows was read against (per window, or one)
-
-
-def _rect_params(rect: Rect) -> tuple[float, float, float, float, float]:
-    return rect.x_mm, rect.y_mm, rect.angle_deg, rect.length_mm, rect.width_mm
 
 
 def _overlap(window: tuple[int, int, int, int], box: tuple[int, int, int, int]) -> bool:

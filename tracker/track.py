@@ -136,16 +136,16 @@ class Track:
             z = np.array([r.x_mm, r.y_mm, predicted + d_long, r.length_mm, r.width_mm])
         else:
             z = np.array([r.x_mm, r.y_mm, predicted + d_short, r.width_mm, r.length_mm])
-        r_cov = self.kf.R if m.size_cov_mm2 is None else self._size_noise(m, swapped, cfg)
+        r_cov = self.kf.R if m.size_cov_mm2 is None else self._noise_of(m, swapped, cfg)
         self.kf.update(z.reshape(5, 1), R=r_cov)
         self._normalise()
         self._history.append((self.t_ns, self.kf.x.copy(), self.kf.P.copy()))
 
-    def _size_noise(self, m: Measurement, swapped: bool, cfg: TrackConfig) -> np.ndarray:
+    def _noise_of(self, m: Measurement, swapped: bool, cfg: TrackConfig) -> np.ndarray:
         """The measurement's noise covariance: a box's size counts as much as its view tells (see BoxFit)."""
         order = [1, 0] if swapped else [0, 1]
         r_cov = self.kf.R.copy()
-        r_cov[3:, 3:] = m.size_cov_mm2[np.ix_(order, order)] + np.eye(2) * cfg.size_sigma_mm**2
+        r_cov[3:, 3:] = _size_noise(m, cfg)[np.ix_(order, order)]
         return r_cov
 
     def known(self, cfg: TrackConfig) -> KnownPart:
@@ -201,8 +201,13 @@ def _filter_from(m: Measurement, cfg: TrackConfig) -> KalmanFilter:
     kf = make_filter(np.array([r.x_mm, r.y_mm, r.angle_deg, r.length_mm, r.width_mm]), cfg)
     if m.size_cov_mm2 is not None:
         size = [LENGTH, WIDTH]
-        kf.P[np.ix_(size, size)] = m.size_cov_mm2 + np.eye(2) * cfg.size_sigma_mm**2
+        kf.P[np.ix_(size, size)] = _size_noise(m, cfg)
     return kf
+
+
+def _size_noise(m: Measurement, cfg: TrackConfig) -> np.ndarray:
+    """A box's size uncertainty (length, width; mm^2): its view's, and no less than any measurement's."""
+    return m.size_cov_mm2 + np.eye(2) * cfg.size_sigma_mm**2
 
 
 class Tracker:
