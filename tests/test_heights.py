@@ -13,13 +13,10 @@ from conftest import rendered, run_pipeline
 from tracker.box import EdgeWindows, lengths_in_faces
 from tracker.boxfit import _best_shades
 from tracker.cli import main
-from tracker.config import MeasureConfig, TrackConfig, TrackerConfig
+from tracker.config import MeasureConfig, TrackerConfig
 from tracker.evaluate import evaluate
-from tracker.geometry import Rect
-from tracker.measure import Measurement
 from tracker.pipeline import Pipeline
 from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec
-from tracker.track import Tracker
 
 
 def _box_scene(height_mm: float, tilt_deg: float) -> SceneSpec:
@@ -117,23 +114,6 @@ def test_part_height_option_is_validated(scene_dir, capsys):
     assert main([*base, "--part-height", "auto", "--max-frames", "2"]) == 0
 
 
-@pytest.mark.parametrize("height_mm,tilt_deg", [(10, 0), (20, 20), (60, 20)])
-def test_auto_estimates_a_box_height(height_mm, tilt_deg):
-    """--part-height auto: a new part's height chosen among height_starts_mm by the box model, then
-    each view's own height (a track's height and size lent to its fit), combined per track. From the
-    first third of the crossing on, the height is within 0.5 mm and the pose as good as with the
-    height given. Measured on this scene's other cells it is not always so (the README says so):
-    5 mm at 10 deg comes out 11-13 mm, 20 mm at 10 deg 20.9 mm, a flat part about 3 mm."""
-    scene = _box_scene(height_mm, tilt_deg)
-    poses, truths = run_pipeline(scene, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
-    heights = [o["height_mm"] for p in poses for o in p["objects"] if o["measured"]]
-    assert len(heights) > 40
-    third = heights[len(heights) // 3:]
-    assert max(abs(h - height_mm) for h in third) <= 0.5, third
-    s = evaluate(poses, truths, skip_first=2).summary()
-    assert s["centroid_mean_mm"] <= 0.2 and s["angle_mean_deg"] <= 0.05, s
-
-
 def test_a_bag_is_no_box_but_its_pose_stays_sane():
     """A soft pouch (an ellipsoid 90x60x30 mm lying on the belt) at 20 deg tilt. Its silhouette is its
     outline at half its height: with --part-height 15 it is measured like a box top (measured 0.29 mm
@@ -149,40 +129,6 @@ def test_a_bag_is_no_box_but_its_pose_stays_sane():
     assert full["centroid_mean_mm"] <= flat["centroid_mean_mm"] and full["centroid_p95_mm"] < 12.0, (full, flat)
     assert len({o["id"] for p in poses for o in p["objects"]}) == 1
     assert half["missed_frames"] <= 3 and full["missed_frames"] <= 3, (half, full)
-
-
-@pytest.mark.parametrize("tilt_deg,flat_share", [(0, 0.9), (20, 0.5)])
-def test_auto_finds_a_flat_part_flat(tilt_deg, flat_share):
-    """--part-height auto on a flat part: a box of some height explains its edges barely better than
-    the flat rectangle, so the track takes it as flat: height 0 and the flat measurement's pose (a box
-    fitted to it comes out about 3 mm tall, 0.5-1 mm off). Measured: flat in all settled frames
-    straight down, in 59 % at 20 deg tilt (the median view's gain is near the 3 % line there)."""
-    scene = _box_scene(0, tilt_deg)
-    poses, truths = run_pipeline(scene, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
-    settled = [o for p in poses for o in p["objects"] if o["measured"] and o["height_converged"]]
-    assert len(settled) > 40
-    flat = sum(o["height_mm"] == 0.0 for o in settled)
-    assert flat >= flat_share * len(settled), [o["height_mm"] for o in settled]
-    s = evaluate(poses, truths, skip_first=2).summary()
-    assert s["centroid_mean_mm"] <= 0.08 and s["angle_mean_deg"] <= 0.05, s
-
-
-def test_an_estimated_height_settles_only_after_views_that_tell_it():
-    """--part-height auto: a track is 'height not yet converged' until enough views told its height
-    (TrackConfig.height_converged_views), however sure one view says it is; with the height given
-    there is nothing to settle."""
-    cfg = TrackConfig()
-
-    def view(k: int, height_mm: float | None) -> Measurement:
-        return Measurement(Rect(10.0 * k, 0.0, 0.0, 80.0, 50.0), False, (0, 0, 1, 1), (0.0, 0.0), 40,
-                           height_mm, 0.01)
-
-    estimating, given = Tracker(cfg, estimating_height=True), Tracker(cfg)
-    first = estimating.step([view(0, None)], 0)[0]
-    assert not first.height_converged and given.step([view(0, None)], 0)[0].height_converged
-    settled = [estimating.step([view(k, 12.0)], k * 33_000_000)[0].height_converged
-               for k in range(1, cfg.height_converged_views + 1)]
-    assert settled == [False] * (cfg.height_converged_views - 1) + [True]
 
 
 def test_a_cylinder_lying_down_is_no_box_but_its_pose_stays_sane():

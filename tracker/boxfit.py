@@ -47,8 +47,6 @@ _OUTLIER_FACTOR = 4.0
 class BoxFit:
     rect: Rect
     height_mm: float
-    # 1-sigma uncertainty of the height from this view (inf when the height was given).
-    height_sigma_mm: float = math.inf
     # Sum of squared residuals (px^2): lower is the better of two fits.
     cost: float = 0.0
     rms_px: float = 0.0
@@ -56,6 +54,12 @@ class BoxFit:
     # A thin side face's shade trades with the edge next to it: there one side of the footprint is
     # poorly placed and the size uncertain, and a size known from other views (size_prior) places it.
     size_cov_mm2: np.ndarray | None = None
+    # With the height free: this view's own information on (length, width, height) (3x3, 1/mm^2) and
+    # information vector (3), any prior taken back out (see view_information): views add up.
+    shape_info: np.ndarray | None = None
+    shape_vec: np.ndarray | None = None
+    # How many windows the sums were fitted to.
+    windows: int = 0
 
 
 @dataclass(frozen=True)
@@ -111,8 +115,8 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     the edge points (Nx2, normalised) that bring the box near first; ``px_per_norm``: the focal
     length. ``size_prior``: the size known from other views, weighed against the sums as if each had
     noise ``sum_sigma_px``; ``height_prior``: (mm, 1-sigma mm) the height known from other views,
-    likewise (with ``free_height``). The height reported is this view's own (the prior taken back
-    out), with its sigma."""
+    likewise (with ``free_height``). The height reported is the fitted box's; with ``free_height`` the
+    view's own information on its shape (the priors taken back out) comes with it."""
     free = [0, 1, 2, 3, 4, *([_H] if free_height else [])]
     params = box_params(start, height_mm)
 
@@ -149,44 +153,37 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     size_cov = _size_covariance(jac, free, rms) if len(r) > len(free) else None
     if not np.isfinite(params).all() or rms > max_rms_px or min(params[3], params[4]) <= 0:
         return None
-    h, sigma_h = params[_H], math.inf
+    info = (None, None)
     if free_height and len(jac) > len(free):
-        h, sigma_h = _view_height(jac, free, params[_H], rms, prior, height_prior, sum_sigma_px)
+        info = view_information(jac, r, params, rms)
     x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0
         size_cov = None if size_cov is None else size_cov[::-1, ::-1]
+        if info[0] is not None:
+            order = [1, 0, 2]
+            info = (info[0][np.ix_(order, order)], info[1][order])
     rect = Rect(float(x), float(y), wrap_angle_deg(float(angle)), float(length), float(width))
-    return BoxFit(rect, float(h), sigma_h, float(np.sum(r**2)), rms, size_cov)
+    return BoxFit(rect, float(params[_H]), float(np.sum(r**2)), rms, size_cov, *info, len(windows))
 
 
-def _view_height(jac: np.ndarray, free: list[int], fitted_mm: float, rms: float, prior: tuple | None,
-                 height_prior: tuple[float, float] | None, sum_sigma_px: float) -> tuple[float, float]:
-    """This view's own height and its 1 sigma (mm), from a fit's Jacobian and its height."""
-    k = free.index(_H)
-    normal = jac.T @ jac
-    # The variance from the normal matrix, scaled by the residuals' own spread: this view's alone.
-    sigma = _sigma(normal, k, rms)
-    if prior is None or height_prior is None:
-        return fitted_mm, sigma
-    # The known height taken back out of the fit's, with the variance the fit had (the known size's
-    # rows in). The prior's weight was set against sums of noise sum_sigma_px; the variance here is
-    # scaled by their actual spread.
-    for i, w in zip(prior[0], prior[2], strict=True):
-        if i != _H:
-            normal[free.index(i), free.index(i)] += w**2
-    sigma_fit = _sigma(normal, k, rms)
-    prior_sigma = height_prior[1] * rms / sum_sigma_px
-    if not math.isfinite(sigma_fit):
-        return fitted_mm, sigma
-    return fitted_mm + (sigma_fit / prior_sigma) ** 2 * (fitted_mm - height_prior[0]), sigma
+def view_information(jac: np.ndarray, r: np.ndarray, params: np.ndarray, rms: float) -> tuple[np.ndarray, np.ndarray]:
+    """One view's own information on the box's shape (length, width, height: what every view of the
+    part shares) from a fit with all six free: (information 3x3, information vector 3; 1/mm^2, 1/mm).
 
-
-def _sigma(normal: np.ndarray, k: int, rms: float) -> float:
-    """The 1-sigma uncertainty of parameter ``k`` from a normal matrix, the residuals' spread ``rms``."""
+    The pose (x, y, angle) differs from view to view, so it is marginalised out (a Schur complement).
+    Any prior the fit had is taken back out: the vector is that of the sums' own Gauss-Newton
+    estimate from the fit's result. One view of a thin box from above decides its height and size
+    only together (a valley along which the box grows as it shrinks); views from elsewhere run their
+    valleys other ways, and their information added up decides both."""
+    normal, grad = jac.T @ jac, jac.T @ r
+    pose, shape = [0, 1, 2], [3, 4, _H]
     with np.errstate(all="ignore"):
-        var = np.linalg.pinv(normal)[k, k] * rms**2
-    return float(np.sqrt(max(var, 0.0))) if np.isfinite(var) else math.inf
+        coupling = np.linalg.lstsq(normal[np.ix_(pose, pose)], normal[np.ix_(pose, shape)], rcond=None)[0]
+    info = normal[np.ix_(shape, shape)] - normal[np.ix_(shape, pose)] @ coupling
+    reduced_grad = grad[shape] - coupling.T @ grad[pose]
+    variance = max(rms, 1e-6) ** 2
+    return info / variance, (info @ params[shape] - reduced_grad) / variance
 
 
 def _size_covariance(jac: np.ndarray, free: list[int], rms: float) -> np.ndarray:

@@ -103,14 +103,12 @@ class MeasureConfig:
     side_band_px: float = 1.5
     # Minimum |part - belt| contrast (grey levels) for a sub-pixel measurement.
     min_contrast: float = 20.0
-    # Estimate each part's height from how its silhouette changes as it crosses the view (the box
-    # model fitted with the height free, each view lent its track's size and height; views combined
-    # per track by their certainty). What --part-height auto turns on; experimental (README).
+    # Estimate each part's height from how its silhouette changes as it crosses the view (boxes of
+    # several heights fitted to views along its path, the height whose sizes agree kept, then refined;
+    # see tracker/height.py). What --part-height auto turns on.
     estimate_height: bool = False
-    # Heights (mm) a new part's estimate starts from (the box model's best fit kept), and how loosely
-    # its first height is held there (1 sigma, mm) while the view tells its own.
+    # Heights (mm) a part's vote tries.
     height_starts_mm: tuple = (0.0, 5.0, 10.0, 20.0, 40.0, 60.0)
-    height_start_sigma_mm: float = 2.0
     # With a part height: a box outline fitting its edge points worse than this (px RMS) means
     # the part is no box (a cylinder lying down, a bag); its top-face rectangle is kept instead.
     box_max_rms_px: float = 1.0
@@ -133,7 +131,7 @@ class MeasureConfig:
 
     def __post_init__(self) -> None:
         _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "box_max_rms_px",
-                  "touch_min_notch_px", "sum_sigma_px", "square_mm", "box_max_windows", "height_start_sigma_mm")
+                  "touch_min_notch_px", "sum_sigma_px", "square_mm", "box_max_windows")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
         if not 0 <= self.edge_blur_px <= 5:
@@ -160,8 +158,36 @@ class TrackConfig:
     # ... and a track's estimated height (--part-height auto), 1 sigma mm: loose enough that a view
     # still tells its own height (taken back out of the fit), tight enough to keep the fit near.
     known_height_sigma_mm: float = 0.2
-    # The least uncertainty (1 sigma, mm) one view's height estimate counts with in a track's.
-    view_height_sigma_mm: float = 0.2
+    # --part-height auto (tracker/height.py). The vote: views this far apart along the part's path
+    # (mm) fitted at each height of measure.height_starts_mm, their sizes expected to agree as well as
+    # each view decides them, and no better than height_vote_size_sigma_mm (1 sigma); no view adds
+    # more than height_vote_view_cap to a height's score, and how much worse a height explains the
+    # edges counts height_vote_cost_weight (a box fit stopped short costs as much as a wrong height).
+    height_vote_step_mm: float = 40.0
+    height_vote_size_sigma_mm: float = 0.1
+    height_vote_view_cap: float = 25.0
+    height_vote_cost_weight: float = 0.2
+    # The best height wins once it leads the next by this margin (a chi-square) over at least
+    # height_vote_min_views views, or after height_vote_views views.
+    height_vote_margin: float = 25.0
+    height_vote_min_views: int = 3
+    height_vote_views: int = 8
+    # The refinement starts from the vote's size held this tightly (1 sigma, mm: the vote's boxes agree
+    # on it, while one view's fit with the height free slides along its valley), its height within this
+    # fraction of the span of the voted height's neighbours (1 sigma). No view counts surer than
+    # view_height_sigma_mm (1 sigma; its sizes than size_sigma_mm).
+    start_shape_sigma_mm: float = 0.3
+    start_height_span_fraction: float = 0.125
+    view_height_sigma_mm: float = 0.5
+    # A view whose own shape disagrees with the estimate by more than this chi-square (3 degrees of
+    # freedom) is left out; this many in a row, and the height is voted again.
+    view_gate_chi2: float = 25.0
+    view_gate_frames: int = 10
+    # The height is converged once its 1-sigma uncertainty is below this (mm) over at least this many
+    # views; from then on every height_refine_every-th view still tells its own (a second box fit).
+    height_converged_sigma_mm: float = 0.3
+    height_converged_views: int = 5
+    height_refine_every: int = 3
     # Process noise: how hard parts may accelerate / turn / change apparent size.
     accel_sigma_mm_s2: float = 2000.0
     angular_accel_sigma_deg_s2: float = 200.0
@@ -196,13 +222,6 @@ class TrackConfig:
     # ... and the blobs of the frames just before were partly hidden already: the track goes back to its
     # state this many updates earlier (its velocity untouched by them) and coasts from there.
     rewind_frames: int = 3
-    # A track's height estimate is converged once its 1-sigma uncertainty is below this (mm), from
-    # at least this many views (one view's sigma says how well it fits, not whether the fit is right).
-    height_converged_sigma_mm: float = 0.3
-    height_converged_views: int = 5
-    # --part-height auto: a part whose box explains its views' edges less than this fraction better
-    # than a flat rectangle is flat (measured: flat parts 0.6-1.4 %, 5-20 mm boxes 7-30 %).
-    height_min_box_gain: float = 0.03
 
     def __post_init__(self) -> None:
         _positive(self, *(f.name for f in fields(self)))

@@ -19,9 +19,11 @@ import cv2
 import numpy as np
 
 from tracker.box import BoxCamera, EdgeWindows, compile_model
-from tracker.boxfit import BoxFit, SizePrior, box_params, fit_box, inliers, predicted_sums
+from tracker.boxfit import BoxFit, SizePrior, fit_box
+from tracker.calibration import apply_homography
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
+from tracker.height import HeightTrial
 from tracker.split import SplitRule, split_blob
 from tracker.undistort import BeltMapper
 
@@ -44,9 +46,8 @@ class Measurement:
     # Image pixel of the centroid (for drawing), distorted coordinates.
     centroid_px: tuple[float, float]
     edge_points: int
-    # The part's height from this view when estimated (with its 1-sigma uncertainty), else None.
+    # The height of the box this view was fitted with when heights are estimated, else None.
     height_mm: float | None = None
-    height_sigma_mm: float = math.inf
     # False: touching or lying on another part, or parts that could not be told apart (see split.py).
     pickable: bool = True
     # Cut from a blob of touching parts.
@@ -54,11 +55,14 @@ class Measurement:
     # A box's fit: how well this view alone decides the size (covariance of length and width, mm^2,
     # see BoxFit); None where the size is as sure as any.
     size_cov_mm2: np.ndarray | None = field(default=None, compare=False)
-    # --part-height auto: the same blob measured as flat, and how well each explains its edges (sums
-    # of squared window residuals, px^2, over the same windows): the track decides whether it is a box.
+    # --part-height auto (tracker/height.py). While its track votes on its height: the view fitted at
+    # each height. While it refines it: what this view alone tells of (length, width, height) (see
+    # boxfit.view_information).
+    trials: tuple[HeightTrial, ...] = ()
+    shape_info: np.ndarray | None = field(default=None, compare=False)
+    shape_vec: np.ndarray | None = field(default=None, compare=False)
+    # --part-height auto: the same blob measured as flat (the pose of a part its track finds flat).
     flat_rect: Rect | None = None
-    flat_cost_px2: float = 0.0
-    box_cost_px2: float = 0.0
 
 
 class Measurer:
@@ -121,8 +125,8 @@ class Measurer:
         if cv2.contourArea(hull_mm.astype(np.float32)) < cfg.min_area_mm2:
             return None
         edges = box = None
-        height: tuple[float | None, float] = (None, math.inf)
-        flat: tuple[Rect | None, float, float] = (None, 0.0, 0.0)
+        trials: tuple[HeightTrial, ...] = ()
+        flat_rect = None
         if cfg.subpixel and not clipped:
             edges = self._edge_points(frame, reference, contour, (x, y, w, h), others)
         if edges is None or len(edges.points_px) < 12:
@@ -133,44 +137,35 @@ class Measurer:
             points_px = edges.points_px
             pts_mm = self.mapper.to_mm(points_px)
             rect = refine_rect(pts_mm, min_area_rect(pts_mm), band=cfg.side_band_px * self._mm_per_px)
-            if self._boxes:
+            known = self._known_part(rect) if self._boxes else None
+            if self._boxes and not (known is not None and known.flat):
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
-                windows = self._windows(edges)
-                box = self._fit_box(edges, windows, rect)
+                if cfg.estimate_height:
+                    flat_rect = rect
+                box, trials = self._fit_box(edges, self._windows(edges), rect, known)
                 if box is not None:
-                    if cfg.estimate_height:
-                        height = (box.height_mm, box.height_sigma_mm)
-                        flat = (rect, *self._costs(windows, rect, box))
                     rect = box.rect
         centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
         # Another part within reach of its edges touches it, or nearly: not a pick (contract 4b).
-        return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px), *height,
+        return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px),
+                           None if box is None or not cfg.estimate_height else box.height_mm,
                            pickable=others is None, piece=piece,
-                           size_cov_mm2=None if box is None else box.size_cov_mm2, flat_rect=flat[0],
-                           flat_cost_px2=flat[1], box_cost_px2=flat[2])
-
-    def _costs(self, windows: EdgeWindows, flat: Rect, box: BoxFit) -> tuple[float, float]:
-        """How well the flat rectangle and the box explain the edge windows: sums of squared residuals
-        (px^2) over the windows the box explains (its outliers, a corner or a speck, left out of both).
-        The flat rectangle is the plain measurement's, not fitted again: a flat fit of the same freedom
-        explains a thin box's edges about as well, and would take most thin boxes for flat."""
-        # Each with its own side shades (a flat one has none).
-        r = windows.covered_px - np.concatenate([predicted_sums(self._box_camera, windows, box_params(b, h)[None])
-                                                 for b, h in ((box.rect, box.height_mm), (flat, 0.0))])
-        keep = inliers(r[0])
-        return float(np.sum(r[1, keep] ** 2)), float(np.sum(r[0, keep] ** 2))
-
-    def _size_prior(self, rect: Rect) -> SizePrior | None:
-        known = self._known_part(rect)
-        return None if known is None else known.size
+                           size_cov_mm2=None if box is None else box.size_cov_mm2, flat_rect=flat_rect, trials=trials,
+                           shape_info=None if box is None else box.shape_info,
+                           shape_vec=None if box is None else box.shape_vec)
 
     def _known_part(self, rect: Rect) -> KnownPart | None:
         """The known part whose expected centre lies within this blob's rectangle's width."""
         near = [(math.dist((k.x_mm, k.y_mm), (rect.x_mm, rect.y_mm)), k) for k in self._known]
         near = [(d, k) for d, k in near if d < rect.width_mm / 2]
-        # A near-square part's sides may be taken the other way round: none then.
-        return next((k for _, k in sorted(near, key=lambda n: n[0])
-                     if k.size.length_mm - k.size.width_mm > self.config.square_mm), None)
+        return min(near, key=lambda n: n[0])[1] if near else None
+
+    def _size_of(self, known: KnownPart | None) -> SizePrior | None:
+        """A known part's size to lend a fit: none for a near-square part, whose sides may be taken the
+        other way round."""
+        if known is None or known.size.length_mm - known.size.width_mm <= self.config.square_mm:
+            return None
+        return known.size
 
     def _window(self, bbox) -> tuple[int, int, int, int]:
         """The pixels examined for a blob's edges: its bounding box and a margin (x0, y0, x1, y1)."""
@@ -194,30 +189,64 @@ class Measurer:
             return None
         return blocked > 0
 
-    def _fit_box(self, edges: _Edges, windows: EdgeWindows, rect: Rect) -> BoxFit | None:
+    def _fit_box(self, edges: _Edges, windows: EdgeWindows, rect: Rect,
+                 known: KnownPart | None) -> tuple[BoxFit | None, tuple[HeightTrial, ...]]:
+        """The box fitted to a blob's edges (None: no box explains them), and with heights estimated
+        while its track votes (tracker/height.py), the trials at every height it votes on."""
         cfg = self.config
-        if not cfg.estimate_height:
-            return fit_box(self._box_camera, self.mapper.to_norm(edges.points_px), windows, rect,
-                           cfg.part_height_mm, cfg.box_max_rms_px, self._focal_px,
-                           size_prior=self._size_prior(rect), sum_sigma_px=cfg.sum_sigma_px)
         points = self.mapper.to_norm(edges.points_px)
-        known = self._known_part(rect)
+
+        def fit(height_mm: float, **kwargs) -> BoxFit | None:
+            # From the outline measured on the plane of its top (where the measurement maps it already
+            # with the height given): near the box for a tall part too.
+            start = rect if not cfg.estimate_height or height_mm == 0 else self._rect_on_plane(points, height_mm)
+            return fit_box(self._box_camera, points, windows, start, height_mm, cfg.box_max_rms_px, self._focal_px,
+                           sum_sigma_px=cfg.sum_sigma_px, **kwargs)
+
+        if not cfg.estimate_height:
+            return fit(cfg.part_height_mm, size_prior=self._size_of(known)), ()
         if known is not None and known.height_mm is not None:
-            # A part tracked so far: its height and size as known, this view's own height reported.
-            return fit_box(self._box_camera, points, windows, rect, known.height_mm, cfg.box_max_rms_px,
-                           self._focal_px, free_height=True, size_prior=known.size, sum_sigma_px=cfg.sum_sigma_px,
-                           height_prior=(known.height_mm, known.height_sigma_mm))
-        # A new part: each height of height_starts_mm tried with the box model, the one whose sums fit
-        # best kept, its view's own height from there.
-        fits = [fit_box(self._box_camera, points, windows, rect, h, cfg.box_max_rms_px, self._focal_px)
-                for h in cfg.height_starts_mm]
-        fits = [f for f in fits if f is not None]
-        if not fits:
-            return None
-        best = min(fits, key=lambda f: f.cost)
-        return fit_box(self._box_camera, points, windows, best.rect, best.height_mm, cfg.box_max_rms_px,
-                       self._focal_px, free_height=True, height_prior=(best.height_mm, cfg.height_start_sigma_mm),
-                       sum_sigma_px=cfg.sum_sigma_px) or best
+            # Its height voted on, being refined. Its pose: a box of that height, its size lent (with the
+            # height free too, a thin part's fit wanders along the valley where height trades with size).
+            pose = fit(known.height_mm, size_prior=self._size_of(known))
+            if not known.refine:
+                return pose, ()
+            # What this view tells of the part's shape: fitted with the height free, height and size lent.
+            view = fit(known.height_mm, free_height=True, size_prior=self._size_of(known),
+                       height_prior=(known.height_mm, known.height_sigma_mm))
+            if pose is None or view is None:
+                return pose, ()
+            return replace(pose, shape_info=view.shape_info, shape_vec=view.shape_vec), ()
+        # Voted on, or new: at each height of height_starts_mm when the view votes, its pose at the
+        # height leading the vote.
+        lead = None if known is None else known.leading_mm
+        if known is not None and not known.vote:
+            return (None if lead in (None, 0.0) else fit(lead)), ()
+        boxes, trials = self._trials(fit, rect, windows, cfg.height_starts_mm)
+        if lead == 0.0 or not boxes:
+            # Flat leads the vote: the pose is the plain measurement's (as with no box at all: a
+            # cylinder lying down, a bag).
+            return None, trials
+        return next((b for b in boxes if b.height_mm == lead), min(boxes, key=lambda f: f.rms_px)), trials
+
+    def _trials(self, fit, rect: Rect, windows: EdgeWindows,
+                heights_mm: tuple[float, ...]) -> tuple[list[BoxFit], tuple[HeightTrial, ...]]:
+        """A box of each height, its size free: those that fit, and the trials."""
+        cfg = self.config
+        fits = [(h, fit(h)) for h in heights_mm]
+        boxes = [f for _, f in fits if f is not None]
+        if not boxes:
+            return [], ()
+        # A height no box of explains (worse than box_max_rms_px) votes as if it had just that.
+        trials = tuple(HeightTrial(h, rect, cfg.box_max_rms_px, len(windows)) if f is None else
+                       HeightTrial(h, f.rect, f.rms_px, f.windows, _size_variances(f)) for h, f in fits)
+        return boxes, trials
+
+    def _rect_on_plane(self, points_norm: np.ndarray, height_mm: float) -> Rect:
+        """The rectangle of edge points (normalised) mapped onto the plane ``height_mm`` above the belt."""
+        calibration = self.mapper.calibration
+        pts = apply_homography(calibration.homography_at_height(height_mm) @ calibration.camera_matrix, points_norm)
+        return refine_rect(pts, min_area_rect(pts), band=self.config.side_band_px * self._mm_per_px)
 
     def _edge_points(self, frame, reference, contour, bbox, blocked=None) -> _Edges | None:
         """Sub-pixel edge points (Nx2 px); ``blocked``: window pixels of other parts, which no edge's
@@ -279,9 +308,17 @@ class KnownPart:
     x_mm: float
     y_mm: float
     size: SizePrior
-    # Its height as estimated so far (mm, 1 sigma), None when given or not yet estimated.
+    # --part-height auto (tracker/height.py). Its height once voted on, being refined (mm, 1 sigma;
+    # None: given, or still voted on), and whether this view is to tell its own too (a second fit).
     height_mm: float | None = None
     height_sigma_mm: float = math.inf
+    refine: bool = True
+    # Found flat: measured as flat, no box fitted.
+    flat: bool = False
+    # Still voted on: whether this view votes, and the height leading the vote (the pose's; None
+    # before any vote).
+    vote: bool = True
+    leading_mm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -293,6 +330,13 @@ class _Edges:
     cols: _Crossings  # transposed: their "rows" are columns
     origin: tuple[int, int]  # the examined window's first pixel (x0, y0)
     levels: tuple  # the part's level each set of windows was read against (per window, or one)
+
+
+def _size_variances(fit: BoxFit) -> tuple[float, float]:
+    """How well a box fit's view alone decides its length and width (variances, mm^2; inf: not at all)."""
+    if fit.size_cov_mm2 is None:
+        return math.inf, math.inf
+    return float(fit.size_cov_mm2[0, 0]), float(fit.size_cov_mm2[1, 1])
 
 
 def _overlap(window: tuple[int, int, int, int], box: tuple[int, int, int, int]) -> bool:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -13,6 +14,7 @@ from filterpy.kalman import KalmanFilter
 from tracker.boxfit import SizePrior
 from tracker.config import TrackConfig
 from tracker.geometry import rectangle_corners, wrap_angle_deg
+from tracker.height import HeightEstimate
 from tracker.kalman import ANGLE, LENGTH, VX, VY, WIDTH, X, Y, make_filter, set_interval
 from tracker.measure import KnownPart, Measurement
 from tracker.poses import TrackedObject
@@ -22,6 +24,12 @@ class Track:
     def __init__(self, track_id: int, m: Measurement, t_ns: int, cfg: TrackConfig,
                  estimating_height: bool = False) -> None:
         self.id = track_id
+        # --part-height auto: what its views tell of its height (None: heights given, or none).
+        self.height = HeightEstimate(cfg) if estimating_height else None
+        if self.height is not None:
+            self.height.add(m, m.rect.x_mm, m.rect.y_mm)
+            # Its pose at the height its first view puts first.
+            m = replace(m, rect=self.height.rect(m))
         self.kf = _filter_from(m, cfg)
         self.t_ns = t_ns
         self.missed = 0  # consecutive frames without any blob
@@ -44,38 +52,6 @@ class Track:
         # Filter states after the last few updates, oldest first: the blobs just before a size jump
         # were already partly hidden, so the state is taken back to before them (see rewind).
         self._history: deque = deque(maxlen=cfg.rewind_frames + 1)
-        # The height from every view so far, weighted by its certainty (1 / sigma^2).
-        self._height_weight = 0.0
-        self._height_sum = 0.0
-        self._converged_sigma_mm = cfg.height_converged_sigma_mm
-        self._converged_views = cfg.height_converged_views
-        # Heights are estimated (--part-height auto): until a view has told one, it is not settled.
-        self._estimating_height = estimating_height
-        self._height_floor_mm = cfg.view_height_sigma_mm
-        self._height_views = 0
-        # --part-height auto: how much better than flat a box explains each view's edges (a fraction).
-        self._box_gains: list[float] = []
-        self._min_box_gain = cfg.height_min_box_gain
-        self._add_height(m)
-
-    def _add_height(self, m: Measurement) -> None:
-        if m.height_mm is not None and 0 < m.height_sigma_mm < math.inf:
-            # No view is surer than the model is right: one view's luck does not outweigh the rest.
-            w = 1.0 / max(m.height_sigma_mm, self._height_floor_mm) ** 2
-            self._height_views += 1
-            self._height_weight += w
-            self._height_sum += w * m.height_mm
-            if m.flat_cost_px2 > 0:
-                self._box_gains.append(1.0 - m.box_cost_px2 / m.flat_cost_px2)
-
-    @property
-    def flat(self) -> bool:
-        """An estimated height whose box explains the views no better than a flat part: it is flat."""
-        if not self._estimating_height or len(self._box_gains) < self._converged_views:
-            return False
-        # The median view: a box fit gone astray in one view (flat far better) does not decide it.
-        return float(np.median(self._box_gains)) < self._min_box_gain
-
     @property
     def position(self) -> np.ndarray:
         return self.kf.x[[X, Y], 0]
@@ -114,6 +90,9 @@ class Track:
         or an established one whose blobs have kept another size for max_coast_s)."""
         self.kf = _filter_from(m, cfg)
         self.odd_size_since_ns = None
+        # Its views so far were of another size (a sliver), and so told another shape.
+        if self.height is not None:
+            self.height = HeightEstimate(cfg)
 
     def settled(self, cfg: TrackConfig) -> bool:
         return self.same_size >= cfg.coast_min_hits
@@ -122,10 +101,16 @@ class Track:
         self.same_size = self.same_size + 1 if not self.size_jump(m, cfg) else 0
         a = cfg.size_scatter_weight
         self.size_var_mm2 = (1 - a) * self.size_var_mm2 + a * float(np.mean(self._size_residuals(m) ** 2))
-        self._add_height(m)
         self.pickable = m.pickable
-        # A part found flat is measured as flat (the exact rectangle, not a box's with a made-up height).
-        r = m.flat_rect if self.flat and m.flat_rect is not None else m.rect
+        r = m.rect
+        if self.height is not None:
+            leading = self.height.leading_mm, self.height.flat, self.height.voting
+            self.height.add(m, *map(float, self.position))
+            r = self.height.rect(m)
+            if leading != (self.height.leading_mm, self.height.flat, self.height.voting):
+                # Another height leads the vote (or it is decided): the part's size is the one that
+                # height needs, not the last one's.
+                self._reseat_size(r, cfg)
         predicted = float(self.kf.x[ANGLE, 0])
         # The rectangle's two axes are both candidates for the tracked "long side":
         # take the one nearer the prediction, so near-square parts do not flip by 90 deg.
@@ -137,9 +122,26 @@ class Track:
         else:
             z = np.array([r.x_mm, r.y_mm, predicted + d_short, r.width_mm, r.length_mm])
         r_cov = self.kf.R if m.size_cov_mm2 is None else self._noise_of(m, swapped, cfg)
+        shape = None if self.height is None else self.height.shape()
+        if shape is not None:
+            # The size is the one all views so far tell together with the height, not this view's.
+            order = [1, 0] if swapped else [0, 1]
+            z[3:] = shape[0][order]
+            r_cov = r_cov.copy()
+            r_cov[3:, 3:] = shape[1][np.ix_(order, order)] + np.eye(2) * cfg.known_size_sigma_mm**2
         self.kf.update(z.reshape(5, 1), R=r_cov)
         self._normalise()
         self._history.append((self.t_ns, self.kf.x.copy(), self.kf.P.copy()))
+
+    def _reseat_size(self, r, cfg: TrackConfig) -> None:
+        """Take the size of rectangle ``r`` as the part's (its sides in the filter's order)."""
+        size = [LENGTH, WIDTH]
+        sides = sorted((r.length_mm, r.width_mm), reverse=bool(self.kf.x[LENGTH, 0] >= self.kf.x[WIDTH, 0]))
+        self.kf.x[size, 0] = sides
+        self.kf.P[np.ix_(size, size)] = np.eye(2) * cfg.size_sigma_mm**2
+        others = [i for i in range(len(self.kf.x)) if i not in size]
+        self.kf.P[np.ix_(size, others)] = 0.0
+        self.kf.P[np.ix_(others, size)] = 0.0
 
     def _noise_of(self, m: Measurement, swapped: bool, cfg: TrackConfig) -> np.ndarray:
         """The measurement's noise covariance: a box's size counts as much as its view tells (see BoxFit)."""
@@ -153,13 +155,22 @@ class Track:
         x = self.kf.x[:, 0]
         sigma = np.sqrt(np.maximum(np.diag(self.kf.P)[[LENGTH, WIDTH]], cfg.known_size_sigma_mm**2))
         size = SizePrior(float(x[LENGTH]), float(x[WIDTH]), *map(float, sigma))
-        if self._height_weight <= 0:
+        if self.height is None:
             return KnownPart(float(x[X]), float(x[Y]), size)
-        if self.flat:
-            # Its views still tell their own height, from a box of none.
-            return KnownPart(float(x[X]), float(x[Y]), size, 0.0, cfg.known_height_sigma_mm)
-        height_sigma = max(self._height_weight**-0.5, cfg.known_height_sigma_mm)
-        return KnownPart(float(x[X]), float(x[Y]), size, self._height_sum / self._height_weight, height_sigma)
+        if self.height.flat:
+            return KnownPart(float(x[X]), float(x[Y]), size, flat=True)
+        if self.height.voting:
+            return KnownPart(float(x[X]), float(x[Y]), size, vote=self.height.wants_vote(float(x[X]), float(x[Y])),
+                             leading_mm=self.height.leading_mm)
+        # Being refined: the size and height as the track's views tell them together.
+        (length, width, height), cov = self.height.shape()
+        sigma = np.sqrt(np.maximum(np.diag(cov), [cfg.known_size_sigma_mm**2] * 2 + [cfg.known_height_sigma_mm**2]))
+        if width > length:
+            length, width = width, length
+            sigma = sigma[[1, 0, 2]]
+        size = SizePrior(float(length), float(width), float(sigma[0]), float(sigma[1]))
+        return KnownPart(float(x[X]), float(x[Y]), size, max(float(height), 0.0), float(sigma[2]),
+                         refine=self.height.wants_refine)
 
     def _normalise(self) -> None:
         """Keep the angle in (-90, 90] and the length the longer side (180 deg symmetry)."""
@@ -175,11 +186,9 @@ class Track:
     def output(self, measured: Measurement | None) -> TrackedObject:
         x = self.kf.x[:, 0]
         corners = rectangle_corners(x[X], x[Y], x[ANGLE], x[LENGTH], x[WIDTH])
-        height, converged = 0.0, not self._estimating_height
-        if self._height_weight > 0:
-            height = 0.0 if self.flat else self._height_sum / self._height_weight
-            converged = (self._height_weight ** -0.5 < self._converged_sigma_mm
-                         and self._height_views >= self._converged_views)
+        height, converged = 0.0, True
+        if self.height is not None:
+            height, converged = self.height.height_mm, self.height.converged
         return TrackedObject(
             self.id, float(x[X]), float(x[Y]), float(x[ANGLE]), float(x[LENGTH]), float(x[WIDTH]),
             corners, float(x[VX]), float(x[VY]), measured is not None, measured, height_mm=height,

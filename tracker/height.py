@@ -1,0 +1,218 @@
+"""A part's height, estimated from its views as it crosses the camera's (--part-height auto).
+
+One view rarely decides a height: near the edge of the view a flat part looks like a taller box with
+a smaller footprint, and a thin box seen from above shows hardly any side. What decides it is how the
+silhouette changes as the part moves: a wrong height fits each view only with another size, and the
+size it needs changes across the view, while the right height fits every view with the part's one
+size. The estimate has two stages.
+
+1. **Vote.** Views ``track.height_vote_step_mm`` apart along the part's path are fitted as a box at
+   every height of ``measure.height_starts_mm``, its size free (``HeightTrial``). Each height scores,
+   over the views, how much its sizes scatter (what decides it; no view adds more than
+   ``track.height_vote_view_cap``) and how much worse its boxes explain the edges than the view's best
+   height (weighted ``track.height_vote_cost_weight``: a box fit stopped short costs as much as a wrong
+   height). The best height wins once it leads the next by ``track.height_vote_margin`` (from
+   ``track.height_vote_min_views`` views on), or after ``track.height_vote_views`` views. A winner of 0
+   makes the part flat: from then on it is measured as flat, exactly as a flat part always was.
+   Meanwhile a view's pose is its fit at the height leading the vote.
+2. **Refine.** Otherwise each later view is measured as a box of the estimated height, its size lent
+   (its pose), and fitted once more with the height free, the part's shape lent: what that view tells
+   of (length, width, height) on its own (``boxfit.view_information``) adds to the estimate, so views
+   from different places decide together what none decides alone. A view that disagrees with the
+   estimate beyond ``track.view_gate_chi2`` is left out (a hand over the part, a fit gone astray); one
+   that keeps disagreeing for ``track.view_gate_frames`` views starts the vote again. The height has
+   converged once its uncertainty is below ``track.height_converged_sigma_mm`` over
+   ``track.height_converged_views`` views; from then on every ``track.height_refine_every``-th view
+   still tells its own.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from tracker.config import TrackConfig
+from tracker.geometry import Rect
+
+if TYPE_CHECKING:
+    from tracker.measure import Measurement
+
+
+@dataclass(frozen=True)
+class HeightTrial:
+    """One view fitted as a box of one height, its size free."""
+
+    height_mm: float
+    rect: Rect
+    # The fit's RMS residual (px) over its windows.
+    rms_px: float
+    windows: int
+    # How well the view alone decides the length and width at this height (variances, mm^2).
+    size_var_mm2: tuple[float, float] = (math.inf, math.inf)
+
+    def __post_init__(self) -> None:
+        if not (self.height_mm >= 0 and self.rms_px >= 0 and self.windows > 0 and min(self.size_var_mm2) >= 0):
+            raise ValueError(f"height trial: expected height >= 0, rms >= 0 and windows > 0, got {self}")
+
+
+class HeightEstimate:
+    """What a track's views tell of its part's height (and, once voted, its size)."""
+
+    def __init__(self, cfg: TrackConfig) -> None:
+        self._cfg = cfg
+        # No view is surer than the model is right: each counts with at least this uncertainty (mm^2).
+        self._view_floor_mm2 = np.diag([cfg.size_sigma_mm**2] * 2 + [cfg.view_height_sigma_mm**2])
+        self._reset()
+
+    def _reset(self) -> None:
+        self.flat = False
+        self.heights_mm: tuple[float, ...] = ()  # the vote's (those of its first view's trials)
+        # The vote, per view: each height's excess cost (windows' units), sizes and their variances (K, 2).
+        self._excess: list[np.ndarray] = []
+        self._sizes: list[np.ndarray] = []
+        self._size_vars: list[np.ndarray] = []
+        self._last_vote_mm: np.ndarray | None = None  # where the part was at the last vote
+        # The refinement: the information on (length, width, height) and its vector.
+        self._info: np.ndarray | None = None
+        self._vec = np.zeros(3)
+        self._refine_views = 0
+        self._disagreeing = 0
+        self._since_refine = 0  # views since the last that told its own shape
+
+    @property
+    def voting(self) -> bool:
+        return not self.flat and self._info is None
+
+    def wants_vote(self, x_mm: float, y_mm: float) -> bool:
+        """Whether a view of the part at (x, y) would vote: the first, or far enough from the last."""
+        return self.voting and (self._last_vote_mm is None or
+                                math.dist(self._last_vote_mm, (x_mm, y_mm)) >= self._cfg.height_vote_step_mm)
+
+    @property
+    def wants_refine(self) -> bool:
+        """Whether the next view is to tell its own shape: each until the height converges, then every
+        track.height_refine_every-th (a second fit each)."""
+        return not self.converged or self._since_refine + 1 >= self._cfg.height_refine_every
+
+    def add(self, m: Measurement, x_mm: float, y_mm: float) -> None:
+        """Add view ``m`` of the part expected at (x, y)."""
+        if m.trials and self.wants_vote(x_mm, y_mm):
+            self._last_vote_mm = np.array([x_mm, y_mm])
+            self._vote(m.trials)
+        elif self._info is not None:
+            self._since_refine += 1
+            if m.shape_info is not None:
+                self._since_refine = 0
+                self._refine(m.shape_info, m.shape_vec)
+
+    @property
+    def leading_mm(self) -> float | None:
+        """The height the vote puts first so far (None before any view; 0 for a flat part)."""
+        if self.flat:
+            return 0.0
+        if not self._excess or not self.voting:
+            return None
+        return self.heights_mm[int(np.argmin(self._scores()))]
+
+    def shape(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The refined (length, width, height) mm and their covariance (mm^2); None while voting or flat."""
+        if self._info is None:
+            return None
+        cov = np.linalg.inv(self._info)
+        return cov @ self._vec, cov
+
+    @property
+    def height_mm(self) -> float:
+        """The height as estimated so far (0 before any view, and for a flat part)."""
+        shape = self.shape()
+        if shape is not None:
+            return max(float(shape[0][2]), 0.0)
+        return self.leading_mm or 0.0
+
+    @property
+    def converged(self) -> bool:
+        """Whether the height is settled: flat, or refined to track.height_converged_sigma_mm over
+        track.height_converged_views views."""
+        if self.flat:
+            return True
+        shape = self.shape()
+        return (shape is not None and self._refine_views >= self._cfg.height_converged_views
+                and math.sqrt(shape[1][2, 2]) < self._cfg.height_converged_sigma_mm)
+
+    def rect(self, m: Measurement) -> Rect:
+        """The pose to take from view ``m``: its flat measurement when flat leads (or is decided), its trial
+        at the leading height while voting, else its own."""
+        lead = self.leading_mm
+        if lead == 0.0:
+            return m.flat_rect or m.rect
+        if self.voting:
+            return next((t.rect for t in m.trials if t.height_mm == lead), m.rect)
+        return m.rect
+
+    def _vote(self, trials: tuple[HeightTrial, ...]) -> None:
+        by_height = {t.height_mm: t for t in trials}
+        if not self.heights_mm:
+            self.heights_mm = tuple(sorted(by_height))
+        if not set(self.heights_mm) <= set(by_height):
+            return  # a view fitted at other heights (settings changed): it cannot vote with the rest
+        trials = tuple(by_height[h] for h in self.heights_mm)
+        mse = np.array([t.rms_px**2 for t in trials])
+        windows = min(t.windows for t in trials)
+        # How much worse each height explains this view than its best, in windows: a view whose edges
+        # no height explains (a hand over the part) counts no more than one that one height explains.
+        self._excess.append(np.minimum(windows * (mse / max(float(mse.min()), 1e-12) - 1.0), windows))
+        self._sizes.append(np.array([(t.rect.length_mm, t.rect.width_mm) for t in trials]))
+        # Their variances: the view's own, and no less than the floor.
+        self._size_vars.append(np.array([t.size_var_mm2 for t in trials]) + self._cfg.height_vote_size_sigma_mm**2)
+        scores, votes = np.sort(self._scores()), len(self._excess)
+        if votes >= self._cfg.height_vote_views or (
+                votes >= self._cfg.height_vote_min_views and scores[1] - scores[0] >= self._cfg.height_vote_margin):
+            self._decide()
+
+    def _scores(self) -> np.ndarray:
+        """Each height's score (lower is better), in units of a chi-square."""
+        excess = np.sum(self._excess, axis=0)
+        sizes, weights = np.array(self._sizes), 1.0 / np.array(self._size_vars)  # (views, K, 2)
+        mean = np.sum(sizes * weights, axis=0) / np.maximum(np.sum(weights, axis=0), 1e-12)
+        scatter = np.sum(np.minimum((sizes - mean) ** 2 * weights, self._cfg.height_vote_view_cap), axis=(0, 2))
+        return self._cfg.height_vote_cost_weight * excess + scatter
+
+    def _decide(self) -> None:
+        heights = np.array(self.heights_mm)
+        k = int(np.argmin(self._scores()))
+        if heights[k] == 0:
+            self.flat = True
+            return
+        # The refinement starts from the vote: the size its height needed, held start_shape_sigma_mm;
+        # the height held a fraction (track.start_height_span_fraction) of its neighbours' span.
+        sizes, weights = np.array(self._sizes), 1.0 / np.array(self._size_vars)
+        size = (np.sum(sizes * weights, axis=0) / np.maximum(np.sum(weights, axis=0), 1e-12))[k]
+        span = float(heights[min(k + 1, len(heights) - 1)] - heights[max(k - 1, 0)])
+        start = self._cfg.start_shape_sigma_mm
+        sigma = np.array([start, start, max(span * self._cfg.start_height_span_fraction, start)])
+        self._info = np.diag(1.0 / sigma**2)
+        self._vec = self._info @ np.array([*size, heights[k]])
+
+    def _refine(self, info: np.ndarray, vec: np.ndarray) -> None:
+        if not (np.isfinite(info).all() and np.isfinite(vec).all()):
+            return
+        # The view's uncertainty widened by the floor: (I + info . floor)^-1 scales both parts alike.
+        damp = np.linalg.inv(np.eye(3) + info @ self._view_floor_mm2)
+        info, vec = 0.5 * (damp @ info + (damp @ info).T), damp @ vec
+        mean, cov = self.shape()
+        # The view against the estimate, from information alone (a view's own estimate need not exist:
+        # one view may leave a valley open): its own estimate's distance in (its cov + the estimate's).
+        residual = vec - info @ mean
+        chi2 = float(residual @ np.linalg.pinv(info + info @ cov @ info) @ residual)
+        if chi2 > self._cfg.view_gate_chi2:
+            self._disagreeing += 1
+            if self._disagreeing >= self._cfg.view_gate_frames:
+                self._reset()  # the estimate itself is wrong: vote again
+            return
+        self._disagreeing = 0
+        self._info = self._info + info
+        self._vec = self._vec + vec
+        self._refine_views += 1
