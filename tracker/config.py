@@ -109,6 +109,9 @@ class MeasureConfig:
     estimate_height: bool = False
     # Heights (mm) a part's vote tries.
     height_starts_mm: tuple = (0.0, 5.0, 10.0, 20.0, 40.0, 60.0)
+    # At most this many parts vote in one frame (a vote is a box fit per height); the others wait for
+    # the next frame, fitted at their leading height meanwhile.
+    height_votes_per_frame: int = 1
     # With a part height: a box outline fitting its edge points worse than this (px RMS) means
     # the part is no box (a cylinder lying down, a bag); its top-face rectangle is kept instead.
     box_max_rms_px: float = 1.0
@@ -131,7 +134,8 @@ class MeasureConfig:
 
     def __post_init__(self) -> None:
         _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "box_max_rms_px",
-                  "touch_min_notch_px", "sum_sigma_px", "square_mm", "box_max_windows")
+                  "touch_min_notch_px", "sum_sigma_px", "square_mm", "box_max_windows",
+                  "height_votes_per_frame")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
         if not 0 <= self.edge_blur_px <= 5:

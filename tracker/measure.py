@@ -84,12 +84,14 @@ class Measurer:
             compile_model()
         self._split_rule = SplitRule(config.touch_min_notch_px, self._min_area_px)
         self._known: Sequence[KnownPart] = ()
+        self._votes_left = 0
 
     def __call__(self, frame: np.ndarray, reference: np.ndarray, mask: np.ndarray,
                  known: Sequence[KnownPart] = ()) -> list[Measurement]:
         """Measure every blob of ``mask``; ``reference`` is the empty belt (float32 or uint8); ``known``:
         the parts tracked so far, where they are expected now and their sizes (boxes use them)."""
         self._known = known
+        self._votes_left = self.config.height_votes_per_frame
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         contours = [c for c in contours if cv2.contourArea(c) >= self._min_area_px]
         boxes = [cv2.boundingRect(c) for c in contours]
@@ -220,8 +222,10 @@ class Measurer:
         # Voted on, or new: at each height of height_starts_mm when the view votes, its pose at the
         # height leading the vote.
         lead = None if known is None else known.leading_mm
-        if known is not None and not known.vote:
+        if (known is not None and not known.vote) or self._votes_left <= 0:
+            # Between votes, or this frame's votes spent (a vote is several fits): at the leading height.
             return (None if lead in (None, 0.0) else fit(lead)), ()
+        self._votes_left -= 1
         boxes, trials = self._trials(fit, rect, windows, cfg.height_starts_mm)
         if lead == 0.0 or not boxes:
             # Flat leads the vote: the pose is the plain measurement's (as with no box at all: a
