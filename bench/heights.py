@@ -17,6 +17,7 @@ import argparse
 import json
 import math
 import sys
+from collections import Counter
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -24,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 
 from tracker.config import MeasureConfig, TrackerConfig  # noqa: E402
-from tracker.evaluate import MATCH_MM, evaluate  # noqa: E402
+from tracker.evaluate import evaluate  # noqa: E402
 from tracker.pipeline import Pipeline  # noqa: E402
 from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec  # noqa: E402
 
@@ -62,23 +63,29 @@ def run(scene: SceneSpec, measure: MeasureConfig, spent: dict | None = None) -> 
 
 
 def auto_errors(poses: list[dict], truths: list[dict]) -> dict:
-    """Height and centroid errors of measured objects, before and after their height converged."""
+    """Height and centroid errors of measured objects, before and after their height converged: for
+    each part, the measured object nearest it (within half its width) of the track that is so most
+    often (the part's own track, not the ghost a part in view at the start leaves behind)."""
     out: dict[str, list[float]] = {"h_before": [], "h_after": [], "c_before": [], "c_after": []}
-    # The parts' own tracks: those whose height converges (not the ghost a part in view at the start
-    # leaves behind, counted among the false objects).
-    parts = {o["id"] for pose in poses for o in pose["objects"] if o["height_converged"]}
-    for pose, truth in zip(poses, truths, strict=True):
-        measured = [o for o in pose["objects"] if o["measured"] and o["id"] in parts]
-        for t in truth["objects"]:
-            if t is None or t["border_px"] <= 4 or not measured:
+    for k in range(len(truths[0]["objects"])):
+        matched = []
+        for pose, truth in zip(poses, truths, strict=True):
+            t = truth["objects"][k]
+            seen = [o for o in pose["objects"] if o["measured"]]
+            if t is None or t["border_px"] <= 4 or not seen:
                 continue
-            o = min(measured, key=lambda o: math.hypot(o["x_mm"] - t["x_mm"], o["y_mm"] - t["y_mm"]))
+            o = min(seen, key=lambda o: math.hypot(o["x_mm"] - t["x_mm"], o["y_mm"] - t["y_mm"]))
             c = math.hypot(o["x_mm"] - t["x_mm"], o["y_mm"] - t["y_mm"])
-            if c > MATCH_MM:
-                continue
-            when = "after" if o["height_converged"] else "before"
-            out[f"h_{when}"].append(abs(o["height_mm"] - t["height_mm"]))
-            out[f"c_{when}"].append(c)
+            if c < t["width_mm"] / 2:
+                matched.append((o, t, c))
+        if not matched:
+            continue
+        own = Counter(o["id"] for o, _, _ in matched).most_common(1)[0][0]
+        for o, t, c in matched:
+            if o["id"] == own:
+                when = "after" if o["height_converged"] else "before"
+                out[f"h_{when}"].append(abs(o["height_mm"] - t["height_mm"]))
+                out[f"c_{when}"].append(c)
     return {k: (float(np.mean(v)) if v else math.nan) for k, v in out.items()} | {
         "converged_fraction": len(out["h_after"]) / max(1, len(out["h_after"]) + len(out["h_before"])),
         "h_after_max": float(np.max(out["h_after"])) if out["h_after"] else math.nan}

@@ -148,6 +148,8 @@ class MeasureConfig:
                            f"got {self.height_starts_mm!r}") from None
         if not starts or not all(0 <= h < 5000 for h in starts):
             raise BadInput(f"measure.height_starts_mm: expected heights from 0 to 5000 mm, got {starts!r}")
+        if len(set(starts)) < 2:
+            raise BadInput(f"measure.height_starts_mm: expected at least two heights to vote on, got {starts!r}")
         object.__setattr__(self, "height_starts_mm", starts)
 
 

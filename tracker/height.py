@@ -52,6 +52,8 @@ class HeightTrial:
     windows: int
     # How well the view alone decides the length and width at this height (variances, mm^2).
     size_var_mm2: tuple[float, float] = (math.inf, math.inf)
+    # False: no box of this height explains the view (rect is the plain measurement's).
+    fitted: bool = True
 
     def __post_init__(self) -> None:
         if not (self.height_mm >= 0 and self.rms_px >= 0 and self.windows > 0 and min(self.size_var_mm2) >= 0):
@@ -74,6 +76,7 @@ class HeightEstimate:
         self._excess: list[np.ndarray] = []
         self._sizes: list[np.ndarray] = []
         self._size_vars: list[np.ndarray] = []
+        self._fitted: list[np.ndarray] = []  # (K,) whether each height's box explained the view
         self._last_vote_mm: np.ndarray | None = None  # where the part was at the last vote
         # The refinement: the information on (length, width, height) and its vector.
         self._info: np.ndarray | None = None
@@ -100,8 +103,7 @@ class HeightEstimate:
     def add(self, m: Measurement, x_mm: float, y_mm: float) -> None:
         """Add view ``m`` of the part expected at (x, y)."""
         if m.trials and self.wants_vote(x_mm, y_mm):
-            self._last_vote_mm = np.array([x_mm, y_mm])
-            self._vote(m.trials)
+            self._vote(m.trials, x_mm, y_mm)
         elif self._info is not None:
             self._since_refine += 1
             if m.shape_info is not None:
@@ -152,13 +154,15 @@ class HeightEstimate:
             return next((t.rect for t in m.trials if t.height_mm == lead), m.rect)
         return m.rect
 
-    def _vote(self, trials: tuple[HeightTrial, ...]) -> None:
+    def _vote(self, trials: tuple[HeightTrial, ...], x_mm: float, y_mm: float) -> None:
         by_height = {t.height_mm: t for t in trials}
         if not self.heights_mm:
             self.heights_mm = tuple(sorted(by_height))
         if not set(self.heights_mm) <= set(by_height):
             return  # a view fitted at other heights (settings changed): it cannot vote with the rest
+        self._last_vote_mm = np.array([x_mm, y_mm])
         trials = tuple(by_height[h] for h in self.heights_mm)
+        self._fitted.append(np.array([t.fitted for t in trials]))
         mse = np.array([t.rms_px**2 for t in trials])
         windows = min(t.windows for t in trials)
         # How much worse each height explains this view than its best, in windows: a view whose edges
@@ -177,8 +181,10 @@ class HeightEstimate:
         excess = np.sum(self._excess, axis=0)
         sizes, weights = np.array(self._sizes), 1.0 / np.array(self._size_vars)  # (views, K, 2)
         mean = np.sum(sizes * weights, axis=0) / np.maximum(np.sum(weights, axis=0), 1e-12)
-        scatter = np.sum(np.minimum((sizes - mean) ** 2 * weights, self._cfg.height_vote_view_cap), axis=(0, 2))
-        return self._cfg.height_vote_cost_weight * excess + scatter
+        scatter = np.minimum((sizes - mean) ** 2 * weights, self._cfg.height_vote_view_cap)
+        # A view no box of a height explains counts against it as much as a view can.
+        scatter[~np.array(self._fitted)] = self._cfg.height_vote_view_cap
+        return self._cfg.height_vote_cost_weight * excess + np.sum(scatter, axis=(0, 2))
 
     def _decide(self) -> None:
         heights = np.array(self.heights_mm)
@@ -186,6 +192,8 @@ class HeightEstimate:
         if heights[k] == 0:
             self.flat = True
             return
+        if not np.any(np.array(self._fitted)[:, k]):
+            return  # no box of the winning height explained any view: no size to start from; vote on
         # The refinement starts from the vote: the size its height needed, held start_shape_sigma_mm;
         # the height held a fraction (track.start_height_span_fraction) of its neighbours' span.
         sizes, weights = np.array(self._sizes), 1.0 / np.array(self._size_vars)

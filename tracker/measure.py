@@ -220,7 +220,7 @@ class Measurer:
                 return pose, ()
             return replace(pose, shape_info=view.shape_info, shape_vec=view.shape_vec), ()
         # Voted on, or new: at each height of height_starts_mm when the view votes, its pose at the
-        # height leading the vote.
+        # height leading the vote (a new part's: the height that fits it best).
         lead = None if known is None else known.leading_mm
         if (known is not None and not known.vote) or self._votes_left <= 0:
             # Between votes, or this frame's votes spent (a vote is several fits): at the leading height.
@@ -242,7 +242,7 @@ class Measurer:
         if not boxes:
             return [], ()
         # A height no box of explains (worse than box_max_rms_px) votes as if it had just that.
-        trials = tuple(HeightTrial(h, rect, cfg.box_max_rms_px, len(windows)) if f is None else
+        trials = tuple(HeightTrial(h, rect, cfg.box_max_rms_px, len(windows), fitted=False) if f is None else
                        HeightTrial(h, f.rect, f.rms_px, f.windows, _size_variances(f)) for h, f in fits)
         return boxes, trials
 

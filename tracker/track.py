@@ -13,7 +13,7 @@ from filterpy.kalman import KalmanFilter
 
 from tracker.boxfit import SizePrior
 from tracker.config import TrackConfig
-from tracker.geometry import rectangle_corners, wrap_angle_deg
+from tracker.geometry import Rect, rectangle_corners, wrap_angle_deg
 from tracker.height import HeightEstimate
 from tracker.kalman import ANGLE, LENGTH, VX, VY, WIDTH, X, Y, make_filter, set_interval
 from tracker.measure import KnownPart, Measurement
@@ -133,8 +133,10 @@ class Track:
         self._normalise()
         self._history.append((self.t_ns, self.kf.x.copy(), self.kf.P.copy()))
 
-    def _reseat_size(self, r, cfg: TrackConfig) -> None:
-        """Take the size of rectangle ``r`` as the part's (its sides in the filter's order)."""
+    def _reseat_size(self, r: Rect, cfg: TrackConfig) -> None:
+        """Take the position and size of rectangle ``r`` as the part's (its sides in the filter's order):
+        measured at another height, the footprint is elsewhere and of another size."""
+        self.kf.x[[X, Y], 0] = r.x_mm, r.y_mm
         size = [LENGTH, WIDTH]
         sides = sorted((r.length_mm, r.width_mm), reverse=bool(self.kf.x[LENGTH, 0] >= self.kf.x[WIDTH, 0]))
         self.kf.x[size, 0] = sides
