@@ -47,8 +47,7 @@ _OUTLIER_FACTOR = 4.0
 class BoxFit:
     rect: Rect
     height_mm: float
-    # Sum of squared residuals (px^2): lower is the better of two fits.
-    cost: float = 0.0
+    # RMS residual (px): lower is the better of two fits.
     rms_px: float = 0.0
     # How well this view alone decides the footprint's size: the covariance of (length, width) (mm^2).
     # A thin side face's shade trades with the edge next to it: there one side of the footprint is
@@ -164,7 +163,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
             order = [1, 0, 2]
             info = (info[0][np.ix_(order, order)], info[1][order])
     rect = Rect(float(x), float(y), wrap_angle_deg(float(angle)), float(length), float(width))
-    return BoxFit(rect, float(params[_H]), float(np.sum(r**2)), rms, size_cov, *info, len(windows))
+    return BoxFit(rect, float(params[_H]), rms, size_cov, *info, len(windows))
 
 
 def view_information(jac: np.ndarray, r: np.ndarray, params: np.ndarray, rms: float) -> tuple[np.ndarray, np.ndarray]:

@@ -46,8 +46,6 @@ class Measurement:
     # Image pixel of the centroid (for drawing), distorted coordinates.
     centroid_px: tuple[float, float]
     edge_points: int
-    # The height of the box this view was fitted with when heights are estimated, else None.
-    height_mm: float | None = None
     # False: touching or lying on another part, or parts that could not be told apart (see split.py).
     pickable: bool = True
     # Cut from a blob of touching parts.
@@ -150,7 +148,6 @@ class Measurer:
         centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
         # Another part within reach of its edges touches it, or nearly: not a pick (contract 4b).
         return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px),
-                           None if box is None or not cfg.estimate_height else box.height_mm,
                            pickable=others is None, piece=piece,
                            size_cov_mm2=None if box is None else box.size_cov_mm2, flat_rect=flat_rect, trials=trials,
                            shape_info=None if box is None else box.shape_info,
