@@ -179,12 +179,16 @@ class HeightEstimate:
     def _scores(self) -> np.ndarray:
         """Each height's score (lower is better), in units of a chi-square."""
         excess = np.sum(self._excess, axis=0)
-        sizes, weights = np.array(self._sizes), 1.0 / np.array(self._size_vars)  # (views, K, 2)
-        mean = np.sum(sizes * weights, axis=0) / np.maximum(np.sum(weights, axis=0), 1e-12)
+        sizes, weights, mean = self._sizes_weighed()
         scatter = np.minimum((sizes - mean) ** 2 * weights, self._cfg.height_vote_view_cap)
         # A view no box of a height explains counts against it as much as a view can.
         scatter[~np.array(self._fitted)] = self._cfg.height_vote_view_cap
         return self._cfg.height_vote_cost_weight * excess + np.sum(scatter, axis=(0, 2))
+
+    def _sizes_weighed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The vote's sizes (views, K, 2), their weights (1 / variance) and each height's weighted mean (K, 2)."""
+        sizes, weights = np.array(self._sizes), 1.0 / np.array(self._size_vars)
+        return sizes, weights, np.sum(sizes * weights, axis=0) / np.maximum(np.sum(weights, axis=0), 1e-12)
 
     def _decide(self) -> None:
         heights = np.array(self.heights_mm)
@@ -196,8 +200,7 @@ class HeightEstimate:
             return  # no box of the winning height explained any view: no size to start from; vote on
         # The refinement starts from the vote: the size its height needed, held start_shape_sigma_mm;
         # the height held a fraction (track.start_height_span_fraction) of its neighbours' span.
-        sizes, weights = np.array(self._sizes), 1.0 / np.array(self._size_vars)
-        size = (np.sum(sizes * weights, axis=0) / np.maximum(np.sum(weights, axis=0), 1e-12))[k]
+        size = self._sizes_weighed()[2][k]
         span = float(heights[min(k + 1, len(heights) - 1)] - heights[max(k - 1, 0)])
         start = self._cfg.start_shape_sigma_mm
         sigma = np.array([start, start, max(span * self._cfg.start_height_span_fraction, start)])

@@ -75,6 +75,8 @@ class Measurer:
         self._min_area_px = 0.5 * config.min_area_mm2 / mapper.max_mm_per_px() ** 2
         self._mm_per_px = mapper.calibration.mm_per_px_at_centre()
         self._box_camera = BoxCamera(mapper.calibration)
+        # Normalised coordinates -> mm on the plane of a box's top, for each height the vote tries.
+        self._plane_homographies: dict[float, np.ndarray] = {}
         # Parts are boxes with side faces (a height given or estimated), not flat rectangles.
         self._boxes = config.part_height_mm > 0 or config.estimate_height
         self._focal_px = float(mapper.calibration.camera_matrix[0, 0])
@@ -135,14 +137,16 @@ class Measurer:
             rect = min_area_rect(hull_mm)
         else:
             points_px = edges.points_px
-            pts_mm = self.mapper.to_mm(points_px)
+            # Undistorted once: the rectangle on the belt and a box's fit both start from them.
+            points_norm = self.mapper.to_norm(points_px)
+            pts_mm = self.mapper.norm_to_mm(points_norm)
             rect = refine_rect(pts_mm, min_area_rect(pts_mm), band=cfg.side_band_px * self._mm_per_px)
             known = self._known_part(rect) if self._boxes else None
             if self._boxes and not (known is not None and known.flat):
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
                 if cfg.estimate_height:
                     flat_rect = rect
-                box, trials = self._fit_box(edges, self._windows(edges), rect, known)
+                box, trials = self._fit_box(points_norm, self._windows(edges), rect, known)
                 if box is not None:
                     rect = box.rect
         centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
@@ -188,19 +192,21 @@ class Measurer:
             return None
         return blocked > 0
 
-    def _fit_box(self, edges: _Edges, windows: EdgeWindows, rect: Rect,
+    def _fit_box(self, points: np.ndarray, windows: EdgeWindows, rect: Rect,
                  known: KnownPart | None) -> tuple[BoxFit | None, tuple[HeightTrial, ...]]:
-        """The box fitted to a blob's edges (None: no box explains them), and with heights estimated
-        while its track votes (tracker/height.py), the trials at every height it votes on."""
+        """The box fitted to a blob's edges (``points``: normalised; None: no box explains them), and with
+        heights estimated while its track votes (tracker/height.py), the trials at every height it votes on."""
         cfg = self.config
-        points = self.mapper.to_norm(edges.points_px)
+        starts: dict[float, Rect] = {}
 
         def fit(height_mm: float, **kwargs) -> BoxFit | None:
             # From the outline measured on the plane of its top (where the measurement maps it already
             # with the height given): near the box for a tall part too.
-            start = rect if not cfg.estimate_height or height_mm == 0 else self._rect_on_plane(points, height_mm)
-            return fit_box(self._box_camera, points, windows, start, height_mm, cfg.box_max_rms_px, self._focal_px,
-                           sum_sigma_px=cfg.sum_sigma_px, **kwargs)
+            if height_mm not in starts:
+                starts[height_mm] = (rect if not cfg.estimate_height or height_mm == 0
+                                     else self._rect_on_plane(points, height_mm))
+            return fit_box(self._box_camera, points, windows, starts[height_mm], height_mm, cfg.box_max_rms_px,
+                           self._focal_px, sum_sigma_px=cfg.sum_sigma_px, **kwargs)
 
         if not cfg.estimate_height:
             return fit(cfg.part_height_mm, size_prior=self._size_of(known)), ()
@@ -245,8 +251,13 @@ class Measurer:
 
     def _rect_on_plane(self, points_norm: np.ndarray, height_mm: float) -> Rect:
         """The rectangle of edge points (normalised) mapped onto the plane ``height_mm`` above the belt."""
-        calibration = self.mapper.calibration
-        pts = apply_homography(calibration.homography_at_height(height_mm) @ calibration.camera_matrix, points_norm)
+        homography = self._plane_homographies.get(height_mm)
+        if homography is None:
+            calibration = self.mapper.calibration
+            homography = calibration.homography_at_height(height_mm) @ calibration.camera_matrix
+            if height_mm in self.config.height_starts_mm:  # a refined height is new every frame: not kept
+                self._plane_homographies[height_mm] = homography
+        pts = apply_homography(homography, points_norm)
         return refine_rect(pts, min_area_rect(pts), band=self.config.side_band_px * self._mm_per_px)
 
     def _edge_points(self, frame, reference, contour, bbox, blocked=None) -> _Edges | None:

@@ -108,9 +108,9 @@ class Track:
             self.height.add(m, *map(float, self.position))
             r = self.height.rect(m)
             if leading != (self.height.leading_mm, self.height.flat, self.height.voting):
-                # Another height leads the vote (or it is decided): the part's size is the one that
-                # height needs, not the last one's.
-                self._reseat_size(r, cfg)
+                # Another height leads the vote (or it is decided): the part's footprint is where that
+                # height puts it, and of the size it needs, not the last one's.
+                self._reseat(r, cfg)
         predicted = float(self.kf.x[ANGLE, 0])
         # The rectangle's two axes are both candidates for the tracked "long side":
         # take the one nearer the prediction, so near-square parts do not flip by 90 deg.
@@ -133,7 +133,7 @@ class Track:
         self._normalise()
         self._history.append((self.t_ns, self.kf.x.copy(), self.kf.P.copy()))
 
-    def _reseat_size(self, r: Rect, cfg: TrackConfig) -> None:
+    def _reseat(self, r: Rect, cfg: TrackConfig) -> None:
         """Take the position and size of rectangle ``r`` as the part's (its sides in the filter's order):
         measured at another height, the footprint is elsewhere and of another size."""
         self.kf.x[[X, Y], 0] = r.x_mm, r.y_mm
@@ -165,13 +165,13 @@ class Track:
             return KnownPart(float(x[X]), float(x[Y]), size, vote=self.height.wants_vote(float(x[X]), float(x[Y])),
                              leading_mm=self.height.leading_mm)
         # Being refined: the size and height as the track's views tell them together.
-        (length, width, height), cov = self.height.shape()
+        (length, width, _), cov = self.height.shape()
         sigma = np.sqrt(np.maximum(np.diag(cov), [cfg.known_size_sigma_mm**2] * 2 + [cfg.known_height_sigma_mm**2]))
         if width > length:
             length, width = width, length
             sigma = sigma[[1, 0, 2]]
         size = SizePrior(float(length), float(width), float(sigma[0]), float(sigma[1]))
-        return KnownPart(float(x[X]), float(x[Y]), size, max(float(height), 0.0), float(sigma[2]),
+        return KnownPart(float(x[X]), float(x[Y]), size, self.height.height_mm, float(sigma[2]),
                          refine=self.height.wants_refine)
 
     def _normalise(self) -> None:

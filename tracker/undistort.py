@@ -35,7 +35,10 @@ class BeltMapper:
         self.spent_ns = 0
 
     def to_mm(self, points_px: np.ndarray) -> np.ndarray:
-        norm = self.to_norm(points_px)
+        return self.norm_to_mm(self.to_norm(points_px))
+
+    def norm_to_mm(self, norm: np.ndarray) -> np.ndarray:
+        """Undistorted normalised coordinates (Nx2) -> mm on the plane."""
         return apply_homography(self._h_norm, norm) if len(norm) else np.zeros((0, 2))
 
     def to_norm(self, points_px: np.ndarray) -> np.ndarray:
