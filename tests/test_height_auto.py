@@ -14,13 +14,15 @@ from collections import Counter
 
 import numpy as np
 import pytest
-from conftest import run_pipeline
+from conftest import rendered, run_pipeline
 from test_heights import _box_scene
+from textured_support import mpeg4_round_trip
 
-from tracker.config import MeasureConfig, TrackConfig, TrackerConfig
+from tracker.config import MeasureConfig, SegmentConfig, TrackConfig, TrackerConfig
 from tracker.geometry import Rect
 from tracker.height import HeightEstimate, HeightTrial
 from tracker.measure import Measurement
+from tracker.pipeline import Pipeline
 from tracker.synthetic import CameraSpec, PartSpec, SceneSpec
 
 
@@ -183,3 +185,30 @@ def test_two_parts_of_different_heights_each_get_their_own():
         after = frames[converged[0]:]
         assert max(abs(o["height_mm"] - parts[k].height_mm) for o, _ in after) <= bound_mm, k
         assert np.mean([_centroid_mm(o, t) for o, t in after]) <= 0.2, k
+
+
+def test_on_a_textured_moving_belt_each_part_keeps_one_track_and_its_height():
+    """A real belt: a knurl moving with the parts, sensor noise, an MPEG-4 round trip, and the belt's
+    own motion measured (parts are tracked in the belt's frame). The views a height is voted on are
+    told apart by where the camera saw them, and the trials' poses move into the belt's frame with the
+    rest (before, they stayed in the world's: every frame a new track, hundreds of mm off). Measured:
+    one track, its centroid 1.1 mm off on average; converged heights 17.3-18.2 mm for the 20 mm box
+    (the height-free fits of noisy views are biased low; with the height given the centroid is within
+    0.07 mm)."""
+    cam = CameraSpec(width=480, height=360, focal_px=420.0, tilt_deg=10, yaw_deg=15)
+    part = PartSpec(80, 50, 20.0, -420, -30, 20, 300, 40, omega_deg_s=20.0, intensity=190)
+    scene = SceneSpec(cam, (part,), fps=30, n_frames=90, supersample=4, blur_samples=3, noise_sigma=2.0,
+                      belt_texture=10.0, belt_velocity_mm_s=(300.0, 40.0))
+    renderer, frames = rendered(scene)
+    images = mpeg4_round_trip([image for image, _ in frames], fps=scene.fps)
+    config = TrackerConfig(segment=SegmentConfig(model="textured"), measure=MeasureConfig(estimate_height=True))
+    pipeline = Pipeline(renderer.calibration, config)
+    results = [pipeline.process(i, image, scene.t_ns(i)) for i, image in enumerate(images)]
+    assert len({o.id for r in results for o in r.objects}) == 1
+    measured = [(o, truth["objects"][0]) for r, (_, truth) in zip(results, frames, strict=True)
+                for o in r.objects if o.measured and truth["objects"][0] is not None]
+    assert len(measured) > 40
+    assert np.mean([math.hypot(o.x_mm - t["x_mm"], o.y_mm - t["y_mm"]) for o, t in measured]) <= 1.5
+    heights = [o.height_mm for o, _ in measured if o.height_converged]
+    assert len(heights) >= len(measured) / 2
+    assert max(abs(h - part.height_mm) for h in heights) <= 3.0, heights

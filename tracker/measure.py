@@ -61,6 +61,18 @@ class Measurement:
     shape_vec: np.ndarray | None = field(default=None, compare=False)
     # --part-height auto: the same blob measured as flat (the pose of a part its track finds flat).
     flat_rect: Rect | None = None
+    # Where in the camera's view it was measured (world frame, mm): the views a height is estimated
+    # from are told apart by it, also where the part is tracked on a moving belt's own frame.
+    view_mm: tuple[float, float] = (0.0, 0.0)
+
+    def moved(self, dx_mm: float, dy_mm: float) -> Measurement:
+        """The same view with its poses (the rectangle, the flat one, the trials') moved by (dx, dy): into
+        a moving belt's own frame and back."""
+        def move(r: Rect) -> Rect:
+            return replace(r, x_mm=r.x_mm + dx_mm, y_mm=r.y_mm + dy_mm)
+
+        return replace(self, rect=move(self.rect), flat_rect=None if self.flat_rect is None else move(self.flat_rect),
+                       trials=tuple(replace(t, rect=move(t.rect)) for t in self.trials))
 
 
 class Measurer:
@@ -134,13 +146,13 @@ class Measurer:
         if edges is None or len(edges.points_px) < 12:
             # Binary staircase: boundary pixel centres sit half a pixel inside the edge.
             points_px = contour.reshape(-1, 2).astype(np.float64)
-            rect = min_area_rect(hull_mm)
+            rect = view = min_area_rect(hull_mm)
         else:
             points_px = edges.points_px
             # Undistorted once: the rectangle on the belt and a box's fit both start from them.
             points_norm = self.mapper.to_norm(points_px)
             pts_mm = self.mapper.norm_to_mm(points_norm)
-            rect = refine_rect(pts_mm, min_area_rect(pts_mm), band=cfg.side_band_px * self._mm_per_px)
+            rect = view = refine_rect(pts_mm, min_area_rect(pts_mm), band=cfg.side_band_px * self._mm_per_px)
             known = self._known_part(rect) if self._boxes else None
             if self._boxes and not (known is not None and known.flat):
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
@@ -152,7 +164,7 @@ class Measurer:
         centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
         # Another part within reach of its edges touches it, or nearly: not a pick (contract 4b).
         return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px),
-                           pickable=others is None, piece=piece,
+                           pickable=others is None, piece=piece, view_mm=(view.x_mm, view.y_mm),
                            size_cov_mm2=None if box is None else box.size_cov_mm2, flat_rect=flat_rect, trials=trials,
                            shape_info=None if box is None else box.shape_info,
                            shape_vec=None if box is None else box.shape_vec)

@@ -98,18 +98,17 @@ class Pipeline:
                            scene_fault=guarded.scene_fault)
 
     def _known(self, t_ns: int) -> list:
-        """The tracked parts where they are expected now, in the world frame (boxes lean on their sizes)."""
+        """The tracked parts where they are expected now, in the world frame (boxes lean on their sizes;
+        tracks on a moving belt live in its frame, offset from the world's by where it has carried them)."""
         if self.config.measure.part_height_mm <= 0 and not self.config.measure.estimate_height:
             return []
-        ox, oy = self._belt_offset_mm
-        return [dataclasses.replace(k, x_mm=k.x_mm + ox, y_mm=k.y_mm + oy) for k in self.tracker.known(t_ns)]
+        return self.tracker.known(t_ns, tuple(map(float, self._belt_offset_mm)))
 
     def _track(self, measurements: list, t_ns: int, belt: tuple[float, float] | None) -> tuple:
         if belt is None:
             return self.tracker.step(measurements, t_ns)
         ox, oy = self._belt_offset_mm
-        on_belt = [dataclasses.replace(m, rect=dataclasses.replace(m.rect, x_mm=m.rect.x_mm - ox,
-                                                                   y_mm=m.rect.y_mm - oy)) for m in measurements]
+        on_belt = [m.moved(-ox, -oy) for m in measurements]
         raw = {id(b): m for b, m in zip(on_belt, measurements, strict=True)}
         return tuple(
             dataclasses.replace(o, x_mm=o.x_mm + ox, y_mm=o.y_mm + oy, corners_mm=o.corners_mm + (ox, oy),

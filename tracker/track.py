@@ -27,7 +27,7 @@ class Track:
         # --part-height auto: what its views tell of its height (None: heights given, or none).
         self.height = HeightEstimate(cfg) if estimating_height else None
         if self.height is not None:
-            self.height.add(m, m.rect.x_mm, m.rect.y_mm)
+            self.height.add(m, *m.view_mm)
             # Its pose at the height its first view puts first.
             m = replace(m, rect=self.height.rect(m))
         self.kf = _filter_from(m, cfg)
@@ -105,7 +105,7 @@ class Track:
         r = m.rect
         if self.height is not None:
             leading = self.height.leading_mm, self.height.flat, self.height.voting
-            self.height.add(m, *map(float, self.position))
+            self.height.add(m, *m.view_mm)
             r = self.height.rect(m)
             if leading != (self.height.leading_mm, self.height.flat, self.height.voting):
                 # Another height leads the vote (or it is decided): the part's footprint is where that
@@ -152,9 +152,11 @@ class Track:
         r_cov[3:, 3:] = _size_noise(m, cfg)[np.ix_(order, order)]
         return r_cov
 
-    def known(self, cfg: TrackConfig) -> KnownPart:
-        """Where the part is expected (as last predicted) and its size as known so far."""
-        x = self.kf.x[:, 0]
+    def known(self, cfg: TrackConfig, offset_mm: tuple[float, float] = (0.0, 0.0)) -> KnownPart:
+        """Where the part is expected (as last predicted; in the world frame: its own, moved by
+        ``offset_mm``) and its size as known so far."""
+        x = self.kf.x[:, 0].copy()
+        x[[X, Y]] += offset_mm
         sigma = np.sqrt(np.maximum(np.diag(self.kf.P)[[LENGTH, WIDTH]], cfg.known_size_sigma_mm**2))
         size = SizePrior(float(x[LENGTH]), float(x[WIDTH]), *map(float, sigma))
         if self.height is None:
@@ -233,13 +235,14 @@ class Tracker:
         self.tracks: list[Track] = []
         self._next_id = 1
 
-    def known(self, t_ns: int) -> list[KnownPart]:
-        """The settled parts, predicted to ``t_ns``: what the measurement may lean on."""
+    def known(self, t_ns: int, offset_mm: tuple[float, float] = (0.0, 0.0)) -> list[KnownPart]:
+        """The settled parts, predicted to ``t_ns``: what the measurement may lean on, in the world frame
+        (the tracks' own moved by ``offset_mm``: see Track.known)."""
         out = []
         for track in self.tracks:
             if track.settled(self.config) and not track.tentative and track.odd_size_since_ns is None:
                 track.predict(t_ns, self.config)
-                out.append(track.known(self.config))
+                out.append(track.known(self.config, offset_mm))
         return out
 
     def step(self, measurements: list[Measurement], t_ns: int) -> tuple[TrackedObject, ...]:
