@@ -9,6 +9,8 @@ README lists them): 5 mm at 0 and 10 deg, 60 mm at 10 deg.
 
 from __future__ import annotations
 
+import dataclasses
+import logging
 import math
 from collections import Counter
 
@@ -77,6 +79,10 @@ def test_auto_finds_a_flat_part_flat(tilt_deg):
     assert len(after) >= len(frames) / 2, (len(after), len(frames))
     assert all(o["height_mm"] == 0.0 for o, _ in after)
     assert np.mean([_centroid_mm(o, t) for o, t in after]) <= 0.05
+    # Its size too, as flat mode measures it (its edges read against the part's own level, not, as a
+    # box's are, against the pixel next to each edge: that read its sides 0.15-0.2 mm long).
+    sides = [max(abs(o["length_mm"] - t["length_mm"]), abs(o["width_mm"] - t["width_mm"])) for o, t in after]
+    assert np.mean(sides) <= 0.03, np.mean(sides)
 
 
 def _view(x_mm: float, sizes_mm: dict[float, float], flat_length_mm: float = 80.0) -> Measurement:
@@ -212,3 +218,19 @@ def test_on_a_textured_moving_belt_each_part_keeps_one_track_and_its_height():
     heights = [o.height_mm for o, _ in measured if o.height_converged]
     assert len(heights) >= len(measured) / 2
     assert max(abs(h - part.height_mm) for h in heights) <= 3.0, heights
+
+
+def test_with_an_approximate_calibration_parts_are_measured_flat_and_the_log_says_why(caplog):
+    """An approximate calibration (a scale, a camera assumed straight down at a guessed distance) cannot
+    turn how a silhouette changes into mm of height: auto measures such parts exactly as flat mode
+    does, and says so once."""
+    renderer, frames = rendered(_box_scene(20.0, 0.0))
+    approximate = dataclasses.replace(renderer.calibration, approximate="a scale only")
+    caplog.set_level(logging.WARNING)
+    auto = Pipeline(approximate, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
+    assert "approximate (a scale only)" in caplog.text and "measured flat" in caplog.text
+    flat = Pipeline(approximate, TrackerConfig())
+    for i, (image, _) in enumerate(frames[:30]):
+        a, f = auto.process(i, image, i), flat.process(i, image, i)
+        assert a.to_dict() == f.to_dict()
+    assert any(o.measured and o.height_mm == 0.0 and o.height_converged for o in a.objects)

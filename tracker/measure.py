@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from tracker.box import BoxCamera, EdgeWindows, compile_model
-from tracker.boxfit import BoxFit, SizePrior, fit_box
+from tracker.boxfit import CONVERGED_STEPS, PRECISE_STEPS, BoxFit, SizePrior, fit_box
 from tracker.calibration import apply_homography
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
@@ -154,13 +154,17 @@ class Measurer:
             pts_mm = self.mapper.norm_to_mm(points_norm)
             rect = view = refine_rect(pts_mm, min_area_rect(pts_mm), band=cfg.side_band_px * self._mm_per_px)
             known = self._known_part(rect) if self._boxes else None
-            if self._boxes and not (known is not None and known.flat):
+            if known is not None and known.flat:
+                rect = self._flat_rect(edges)  # found flat (--part-height auto): measured as flat
+            elif self._boxes:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
                 if cfg.estimate_height:
-                    flat_rect = rect
+                    flat_rect = self._flat_rect(edges)
                 box, trials = self._fit_box(points_norm, self._windows(edges), rect, known)
                 if box is not None:
                     rect = box.rect
+                elif flat_rect is not None:
+                    rect = flat_rect  # no box (yet) for this estimated part: measured as flat parts are
         centroid_px = tuple(float(c) for c in points_px.mean(axis=0))
         # Another part within reach of its edges touches it, or nearly: not a pick (contract 4b).
         return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px),
@@ -168,6 +172,13 @@ class Measurer:
                            size_cov_mm2=None if box is None else box.size_cov_mm2, flat_rect=flat_rect, trials=trials,
                            shape_info=None if box is None else box.shape_info,
                            shape_vec=None if box is None else box.shape_vec)
+
+    def _flat_rect(self, edges: _Edges) -> Rect:
+        """The blob measured as a flat part always is: its edges read against the part's own level (a
+        box's are read against the face next to each edge, which on a flat part is a blurred mix)."""
+        flat = [c.points(edges.part_level) for c in (edges.rows, edges.cols)]
+        pts_mm = self.mapper.to_mm(np.concatenate([flat[0], flat[1][:, ::-1]]) + edges.origin)
+        return refine_rect(pts_mm, min_area_rect(pts_mm), band=self.config.side_band_px * self._mm_per_px)
 
     def _known_part(self, rect: Rect) -> KnownPart | None:
         """The known part whose expected centre lies within this blob's rectangle's width."""
@@ -218,7 +229,8 @@ class Measurer:
                 starts[height_mm] = (rect if not cfg.estimate_height or height_mm == 0
                                      else self._rect_on_plane(points, height_mm))
             return fit_box(self._box_camera, points, windows, starts[height_mm], height_mm, cfg.box_max_rms_px,
-                           self._focal_px, sum_sigma_px=cfg.sum_sigma_px, **kwargs)
+                           self._focal_px, sum_sigma_px=cfg.sum_sigma_px,
+                           converged_steps=PRECISE_STEPS if cfg.estimate_height else CONVERGED_STEPS, **kwargs)
 
         if not cfg.estimate_height:
             return fit(cfg.part_height_mm, size_prior=self._size_of(known)), ()
@@ -305,7 +317,7 @@ class Measurer:
         points = np.concatenate([rows.points(levels[0]), cols.points(levels[1])[:, ::-1]])
         if len(points) == 0:
             return None
-        return _Edges(points + [x0, y0], rows, cols, (x0, y0), tuple(levels))
+        return _Edges(points + [x0, y0], rows, cols, (x0, y0), tuple(levels), part_level)
 
     def _windows(self, edges: _Edges) -> EdgeWindows:
         """The edge windows for the box fit, each read against the face next to its edge."""
@@ -354,6 +366,7 @@ class _Edges:
     cols: _Crossings  # transposed: their "rows" are columns
     origin: tuple[int, int]  # the examined window's first pixel (x0, y0)
     levels: tuple  # the part's level each set of windows was read against (per window, or one)
+    part_level: float  # the part's own level (its inner pixels' median)
 
 
 def _size_variances(fit: BoxFit) -> tuple[float, float]:

@@ -8,6 +8,7 @@ recording replays to byte-identical poses.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time
 
 import cv2
@@ -26,6 +27,8 @@ from tracker.segment.textured import SmoothedView
 from tracker.track import Tracker
 from tracker.undistort import BeltMapper
 
+log = logging.getLogger(__name__)
+
 STAGES = ("segment", "undistort", "measure", "track")
 # On a textured belt, edges are measured through this slight blur (px): it averages the belt's
 # texture over neighbouring rows too, and as it is symmetric the edges stay where they are.
@@ -37,6 +40,14 @@ class Pipeline:
         calibration.require_belt()
         self.calibration = calibration
         self.config = config or TrackerConfig()
+        if self.config.measure.estimate_height and calibration.approximate:
+            # An approximate calibration assumes the camera's distance: how a silhouette changes across
+            # the view then tells a height only as a fraction of that guess, never in mm.
+            log.warning("calibration %s is approximate (%s): without the camera's pose measured on a board no "
+                        "height can be estimated, so parts are measured flat (--part-height MM gives their height)",
+                        calibration.source, calibration.approximate)
+            measure = dataclasses.replace(self.config.measure, estimate_height=False)
+            self.config = dataclasses.replace(self.config, measure=measure)
         # A given height is reported as such; an estimated one comes from each track.
         self._height_mm = 0.0 if self.config.measure.estimate_height else self.config.measure.part_height_mm
         if self.config.measure.part_height_mm >= calibration.camera_height_mm():
