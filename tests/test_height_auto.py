@@ -149,6 +149,27 @@ def test_a_refined_height_converges_only_after_enough_views():
     assert height.height_mm == pytest.approx(20.0, abs=0.01)
 
 
+def test_views_that_scatter_more_than_they_claim_converge_only_as_their_scatter_allows():
+    """Views that each claim their height to 0.01 mm but scatter by +-1.5 mm, as a blurred image's do
+    (each within the gate): the estimate is as unsure as their scatter says, so it converges later
+    (measured: after 9 views) than views that agree as well as they claim (5: the test above), and
+    on their mean."""
+    cfg = TrackConfig()
+    height = HeightEstimate(cfg)
+    for k in range(cfg.height_vote_min_views):
+        x = k * cfg.height_vote_step_mm
+        height.add(_view(x, _sizes(x, 20.0)), x, 0.0)
+    info = np.diag([1e4, 1e4, 1e4])
+    converged = []
+    for k in range(4 * cfg.height_converged_views):
+        h = 20.0 + (1.5 if k % 2 else -1.5)
+        height.add(Measurement(Rect(0.0, 0.0, 0.0, 80.0, 50.0), False, (0, 0, 1, 1), (0.0, 0.0), 40,
+                               shape_info=info, shape_vec=info @ np.array([80.0, 50.0, h])), 0.0, 0.0)
+        converged.append(height.converged)
+    assert not any(converged[:cfg.height_converged_views + 2]) and converged[-1], converged
+    assert height.height_mm == pytest.approx(20.0, abs=0.2)
+
+
 def test_a_view_that_disagrees_is_left_out_and_many_start_the_vote_again():
     cfg = TrackConfig()
     height = HeightEstimate(cfg)
@@ -197,10 +218,12 @@ def test_on_a_textured_moving_belt_each_part_keeps_one_track_and_its_height():
     """A real belt: a knurl moving with the parts, sensor noise, an MPEG-4 round trip, and the belt's
     own motion measured (parts are tracked in the belt's frame). The views a height is voted on are
     told apart by where the camera saw them, and the trials' poses move into the belt's frame with the
-    rest (before, they stayed in the world's: every frame a new track, hundreds of mm off). Measured:
-    one track, its centroid 1.1 mm off on average; converged heights 17.3-18.2 mm for the 20 mm box
-    (the height-free fits of noisy views are biased low; with the height given the centroid is within
-    0.07 mm)."""
+    rest (before, they stayed in the world's: every frame a new track, hundreds of mm off). What the
+    views tell on their own of the height scatters here and leans low (17-18 mm: the textured model's
+    1 px smoothing), more than they claim, so the estimate does not converge on them (it did, 2-3 mm
+    low, before their scatter counted). They disagree with it until the vote is held again, which
+    finds 20 mm, and the estimate converges on 20.3 mm near the end of the crossing. Measured: one
+    track, its centroid 0.85 mm off on average (0.07 mm with the height given, 4 mm measured as flat)."""
     cam = CameraSpec(width=480, height=360, focal_px=420.0, tilt_deg=10, yaw_deg=15)
     part = PartSpec(80, 50, 20.0, -420, -30, 20, 300, 40, omega_deg_s=20.0, intensity=190)
     scene = SceneSpec(cam, (part,), fps=30, n_frames=90, supersample=4, blur_samples=3, noise_sigma=2.0,
@@ -214,10 +237,10 @@ def test_on_a_textured_moving_belt_each_part_keeps_one_track_and_its_height():
     measured = [(o, truth["objects"][0]) for r, (_, truth) in zip(results, frames, strict=True)
                 for o in r.objects if o.measured and truth["objects"][0] is not None]
     assert len(measured) > 40
-    assert np.mean([math.hypot(o.x_mm - t["x_mm"], o.y_mm - t["y_mm"]) for o, t in measured]) <= 1.5
+    assert np.mean([math.hypot(o.x_mm - t["x_mm"], o.y_mm - t["y_mm"]) for o, t in measured]) <= 1.0
+    # Converged means right: never on a height its views only claim.
     heights = [o.height_mm for o, _ in measured if o.height_converged]
-    assert len(heights) >= len(measured) / 2
-    assert max(abs(h - part.height_mm) for h in heights) <= 3.0, heights
+    assert heights and max(abs(h - part.height_mm) for h in heights) <= 0.5, heights
 
 
 def test_with_an_approximate_calibration_parts_are_measured_flat_and_the_log_says_why(caplog):

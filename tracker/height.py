@@ -37,6 +37,10 @@ import numpy as np
 from tracker.config import TrackConfig
 from tracker.geometry import Rect
 
+# A view's disagreement with the estimate is a chi-square of this many degrees of freedom (length,
+# width, height), whose expectation this is.
+_SHAPE_DOF = 3.0
+
 if TYPE_CHECKING:
     from tracker.measure import Measurement
 
@@ -82,6 +86,7 @@ class HeightEstimate:
         self._info: np.ndarray | None = None
         self._vec = np.zeros(3)
         self._refine_views = 0
+        self._chi2s: list[float] = []  # each refining view's disagreement with the estimate
         self._disagreeing = 0
         self._since_refine = 0  # views since the last that told its own shape
 
@@ -120,11 +125,29 @@ class HeightEstimate:
         return self.heights_mm[int(np.argmin(self._scores()))]
 
     def shape(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The refined (length, width, height) mm and their covariance (mm^2); None while voting or flat."""
+        """The refined (length, width, height) mm and their covariance (mm^2), widened by how much more
+        the views disagree than they claim (see _spread); None while voting or flat."""
+        shape = self._shape()
+        return None if shape is None else (shape[0], shape[1] * self._spread())
+
+    def _shape(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """shape() as the views claim it (their information added up)."""
         if self._info is None:
             return None
         cov = np.linalg.inv(self._info)
         return cov @ self._vec, cov
+
+    def _spread(self) -> float:
+        """How many times the views' disagreement with the estimate exceeds what their information
+        claims: their mean chi-square (each counted at most as the gate, track.view_gate_chi2: a view left
+        out disagrees at least that much) over its expectation, 3 (length, width, height); at least 1,
+        and 1 until track.height_converged_views views have told theirs. A blurred image or a box the
+        model misreads gives views that each claim a height to a fraction of a mm and scatter by
+        several: their estimate is then as unsure as their scatter says, and converges only as that
+        allows."""
+        if len(self._chi2s) < self._cfg.height_converged_views:
+            return 1.0
+        return max(1.0, float(np.mean(np.minimum(self._chi2s, self._cfg.view_gate_chi2))) / _SHAPE_DOF)
 
     @property
     def height_mm(self) -> float:
@@ -213,11 +236,12 @@ class HeightEstimate:
         # The view's uncertainty widened by the floor: (I + info . floor)^-1 scales both parts alike.
         damp = np.linalg.inv(np.eye(3) + info @ self._view_floor_mm2)
         info, vec = 0.5 * (damp @ info + (damp @ info).T), damp @ vec
-        mean, cov = self.shape()
+        mean, cov = self._shape()
         # The view against the estimate, from information alone (a view's own estimate need not exist:
         # one view may leave a valley open): its own estimate's distance in (its cov + the estimate's).
         residual = vec - info @ mean
         chi2 = float(residual @ np.linalg.pinv(info + info @ cov @ info) @ residual)
+        self._chi2s.append(chi2)
         if chi2 > self._cfg.view_gate_chi2:
             self._disagreeing += 1
             if self._disagreeing >= self._cfg.view_gate_frames:
