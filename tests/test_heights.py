@@ -147,3 +147,20 @@ def test_a_cylinder_lying_down_is_no_box_but_its_pose_stays_sane():
     assert flat["centroid_mean_mm"] > 10 * given["centroid_mean_mm"], (flat, given)
     ids = {o["id"] for p in poses for o in p["objects"]}
     assert len(ids) == 1, ids
+
+
+def test_the_option_replaces_the_settings_height_and_settings_cannot_ask_for_both(scene_dir, tmp_path, capsys):
+    """--part-height (auto or mm) replaces whatever height the settings hold; settings that give a
+    height and ask for it to be estimated are refused with one line."""
+    settings = tmp_path / "settings.json"
+    settings.write_text('{"measure": {"part_height_mm": 20}}')
+    base = ["run", "--source", str(scene_dir / "frames" / "%05d.png"), "--calibration",
+            str(scene_dir / "calibration.yaml"), "--no-plc", "--quiet", "--max-frames", "2", "--config", str(settings)]
+    assert main([*base, "--part-height", "auto"]) == 0
+    assert main([*base, "--part-height", "0"]) == 0
+    settings.write_text('{"measure": {"part_height_mm": 20, "estimate_height": true}}')
+    capsys.readouterr()
+    assert main(base) == 2
+    err = capsys.readouterr().err
+    assert "given (part_height_mm) or estimated (estimate_height), got both" in err
+    assert len(err.strip().splitlines()) == 1

@@ -31,9 +31,9 @@ _OUTLINE_ITERATIONS, _SUM_ITERATIONS = 20, 8
 # a twentieth, which takes a third more time). Heights estimated compare fits more finely (see
 # PRECISE_STEPS).
 CONVERGED_STEPS = 1.0
-# The tolerance for fits whose sizes a height vote compares across views, and for fits with the
-# height free, which travel long, nearly flat valleys in small steps (with 1.0 the tests' 10 mm box
-# is estimated 0.6 mm off instead of 0.3).
+# The tolerance of every fit while heights are estimated: a height vote compares the sizes its fits
+# find across views, and a fit with the height free travels long, nearly flat valleys in small steps
+# (with 1.0 the tests' 10 mm box is estimated 0.6 mm off instead of 0.3).
 PRECISE_STEPS = 0.05
 # The side shades' prior, and how weakly it holds them (px of residual per unit of shade): a side
 # face too narrow to show its shade leaves the shade undecided.
@@ -139,7 +139,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     def middling(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
         return sums(p, which, np.full(2, _SHADE_START))
 
-    params, r, jac, _ = _robust(outline, params, free, _OUTLINE_ITERATIONS)
+    params, r, jac, _ = _robust(outline, params, free, _OUTLINE_ITERATIONS, converged=converged_steps)
     index, value, sigma = [], [], []
     if size_prior is not None:
         # Start the sums' fit at the known size too: in a flat valley it need not travel far.

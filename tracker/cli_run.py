@@ -176,10 +176,10 @@ def run(args: argparse.Namespace) -> int:
     given_config = load_config(args.config) if args.config else None
     source, calibration, recorded_config = open_inputs(args)
     config = given_config or recorded_config or TrackerConfig()
-    if args.part_height == "auto":
-        config = dataclasses.replace(config, measure=dataclasses.replace(config.measure, estimate_height=True))
-    elif args.part_height is not None:
-        height = {"part_height_mm": args.part_height, "estimate_height": False}
+    if args.part_height is not None:
+        # The option replaces the settings' height, given or estimated, whichever they held.
+        auto = args.part_height == "auto"
+        height = {"part_height_mm": 0.0 if auto else args.part_height, "estimate_height": auto}
         config = dataclasses.replace(config, measure=dataclasses.replace(config.measure, **height))
     health = Health()
     stop = threading.Event()

@@ -138,6 +138,9 @@ class MeasureConfig:
                   "height_votes_per_frame")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
+        if self.estimate_height and self.part_height_mm > 0:
+            raise BadInput(f"measure: expected a part height given (part_height_mm) or estimated (estimate_height), "
+                           f"got both (part_height_mm {self.part_height_mm:g})")
         if not 0 <= self.edge_blur_px <= 5:
             raise BadInput(f"measure.edge_blur_px: expected a blur from 0 to 5 px, got {self.edge_blur_px}")
         try:

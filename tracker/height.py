@@ -6,7 +6,8 @@ silhouette changes as the part moves: a wrong height fits each view only with an
 size it needs changes across the view, while the right height fits every view with the part's one
 size. The estimate has two stages.
 
-1. **Vote.** Views ``track.height_vote_step_mm`` apart along the part's path are fitted as a box at
+1. **Vote.** Views the camera saw ``track.height_vote_step_mm`` apart (in the world frame, also on a
+   moving belt whose parts are tracked in its own) along the part's path are fitted as a box at
    every height of ``measure.height_starts_mm``, its size free (``HeightTrial``). Each height scores,
    over the views, how much its sizes scatter (what decides it; no view adds more than
    ``track.height_vote_view_cap``) and how much worse its boxes explain the edges than the view's best
@@ -94,8 +95,14 @@ class HeightEstimate:
     def voting(self) -> bool:
         return not self.flat and self._info is None
 
+    @property
+    def last_vote_mm(self) -> tuple[float, float] | None:
+        """Where the camera saw the last view that voted (world frame, mm; None: none yet)."""
+        return None if self._last_vote_mm is None else (float(self._last_vote_mm[0]), float(self._last_vote_mm[1]))
+
     def wants_vote(self, x_mm: float, y_mm: float) -> bool:
-        """Whether a view of the part at (x, y) would vote: the first, or far enough from the last."""
+        """Whether a view of the part seen at (x, y) (world frame) would vote: the first, or far enough
+        from the last."""
         return self.voting and (self._last_vote_mm is None or
                                 math.dist(self._last_vote_mm, (x_mm, y_mm)) >= self._cfg.height_vote_step_mm)
 
@@ -106,7 +113,7 @@ class HeightEstimate:
         return not self.converged or self._since_refine + 1 >= self._cfg.height_refine_every
 
     def add(self, m: Measurement, x_mm: float, y_mm: float) -> None:
-        """Add view ``m`` of the part expected at (x, y)."""
+        """Add view ``m`` of the part, seen by the camera at (x, y) (world frame, mm)."""
         if m.trials and self.wants_vote(x_mm, y_mm):
             self._vote(m.trials, x_mm, y_mm)
         elif self._info is not None:
@@ -239,6 +246,8 @@ class HeightEstimate:
         mean, cov = self._shape()
         # The view against the estimate, from information alone (a view's own estimate need not exist:
         # one view may leave a valley open): its own estimate's distance in (its cov + the estimate's).
+        # The estimate as its views claim it, not widened by their spread: widened, it would let in the
+        # very views that scatter, and a wrong estimate would never be voted on again.
         residual = vec - info @ mean
         chi2 = float(residual @ np.linalg.pinv(info + info @ cov @ info) @ residual)
         self._chi2s.append(chi2)

@@ -61,9 +61,14 @@ class Measurement:
     shape_vec: np.ndarray | None = field(default=None, compare=False)
     # --part-height auto: the same blob measured as flat (the pose of a part its track finds flat).
     flat_rect: Rect | None = None
-    # Where in the camera's view it was measured (world frame, mm): the views a height is estimated
-    # from are told apart by it, also where the part is tracked on a moving belt's own frame.
-    view_mm: tuple[float, float] = (0.0, 0.0)
+    # Where the camera saw it (world frame, mm: the plain outline's centre; None: the rectangle's). The
+    # views a height is estimated from are told apart by it; unlike the poses it stays in the world
+    # frame when a moving belt's parts are tracked in the belt's own (see moved).
+    view_mm: tuple[float, float] | None = None
+
+    @property
+    def seen_at_mm(self) -> tuple[float, float]:
+        return self.view_mm if self.view_mm is not None else (self.rect.x_mm, self.rect.y_mm)
 
     def moved(self, dx_mm: float, dy_mm: float) -> Measurement:
         """The same view with its poses (the rectangle, the flat one, the trials') moved by (dx, dy): into
@@ -155,11 +160,11 @@ class Measurer:
             rect = view = refine_rect(pts_mm, min_area_rect(pts_mm), band=cfg.side_band_px * self._mm_per_px)
             known = self._known_part(rect) if self._boxes else None
             if known is not None and known.flat:
-                rect = self._flat_rect(edges)  # found flat (--part-height auto): measured as flat
+                rect = self._flat_rect(edges, hull_mm)  # found flat (--part-height auto): measured as flat
             elif self._boxes:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
                 if cfg.estimate_height:
-                    flat_rect = self._flat_rect(edges)
+                    flat_rect = self._flat_rect(edges, hull_mm)
                 box, trials = self._fit_box(points_norm, self._windows(edges), rect, known)
                 if box is not None:
                     rect = box.rect
@@ -173,10 +178,14 @@ class Measurer:
                            shape_info=None if box is None else box.shape_info,
                            shape_vec=None if box is None else box.shape_vec)
 
-    def _flat_rect(self, edges: _Edges) -> Rect:
+    def _flat_rect(self, edges: _Edges, hull_mm: np.ndarray) -> Rect:
         """The blob measured as a flat part always is: its edges read against the part's own level (a
-        box's are read against the face next to each edge, which on a flat part is a blurred mix)."""
-        flat = [c.points(edges.part_level) for c in (edges.rows, edges.cols)]
+        box's are read against the face next to each edge, which on a flat part is a blurred mix); with
+        too little contrast for that, its outline's rectangle (``hull_mm``), as flat mode falls back to."""
+        crossings = (edges.rows, edges.cols)
+        if any(len(c.rows) and np.min(np.abs(edges.part_level - c.belt)) < self.config.min_contrast for c in crossings):
+            return min_area_rect(hull_mm)
+        flat = [c.points(edges.part_level) for c in crossings]
         pts_mm = self.mapper.to_mm(np.concatenate([flat[0], flat[1][:, ::-1]]) + edges.origin)
         return refine_rect(pts_mm, min_area_rect(pts_mm), band=self.config.side_band_px * self._mm_per_px)
 
@@ -249,7 +258,7 @@ class Measurer:
         # Voted on, or new: at each height of height_starts_mm when the view votes, its pose at the
         # height leading the vote (a new part's: the height that fits it best).
         lead = None if known is None else known.leading_mm
-        if (known is not None and not known.vote) or self._votes_left <= 0:
+        if (known is not None and not known.votes_at(rect.x_mm, rect.y_mm)) or self._votes_left <= 0:
             # Between votes, or this frame's votes spent (a vote is several fits): at the leading height.
             return (None if lead in (None, 0.0) else fit(lead)), ()
         self._votes_left -= 1
@@ -339,7 +348,7 @@ class Measurer:
 
 @dataclass(frozen=True)
 class KnownPart:
-    """A part tracked so far: where its centre is expected in this frame (belt mm) and its size."""
+    """A part tracked so far: where its centre is expected in this frame (world frame, mm) and its size."""
 
     x_mm: float
     y_mm: float
@@ -351,10 +360,16 @@ class KnownPart:
     refine: bool = True
     # Found flat: measured as flat, no box fitted.
     flat: bool = False
-    # Still voted on: whether this view votes, and the height leading the vote (the pose's; None
-    # before any vote).
-    vote: bool = True
+    # Still voted on: where the camera saw its last vote's view (world frame, mm; None: none yet), how
+    # far from there a view votes again, and the height leading the vote (the pose's; None before any).
+    last_vote_mm: tuple[float, float] | None = None
+    vote_step_mm: float = 0.0
     leading_mm: float | None = None
+
+    def votes_at(self, x_mm: float, y_mm: float) -> bool:
+        """Whether a view of it seen at (x, y) (world frame) votes: the first, or far enough from the last
+        (as HeightEstimate.wants_vote judges the same view)."""
+        return self.last_vote_mm is None or math.dist(self.last_vote_mm, (x_mm, y_mm)) >= self.vote_step_mm
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ class Track:
         # --part-height auto: what its views tell of its height (None: heights given, or none).
         self.height = HeightEstimate(cfg) if estimating_height else None
         if self.height is not None:
-            self.height.add(m, *m.view_mm)
+            self.height.add(m, *m.seen_at_mm)
             # Its pose at the height its first view puts first.
             m = replace(m, rect=self.height.rect(m))
         self.kf = _filter_from(m, cfg)
@@ -105,7 +105,7 @@ class Track:
         r = m.rect
         if self.height is not None:
             leading = self.height.leading_mm, self.height.flat, self.height.voting
-            self.height.add(m, *m.view_mm)
+            self.height.add(m, *m.seen_at_mm)
             r = self.height.rect(m)
             if leading != (self.height.leading_mm, self.height.flat, self.height.voting):
                 # Another height leads the vote (or it is decided): the part's footprint is where that
@@ -164,8 +164,8 @@ class Track:
         if self.height.flat:
             return KnownPart(float(x[X]), float(x[Y]), size, flat=True)
         if self.height.voting:
-            return KnownPart(float(x[X]), float(x[Y]), size, vote=self.height.wants_vote(float(x[X]), float(x[Y])),
-                             leading_mm=self.height.leading_mm)
+            return KnownPart(float(x[X]), float(x[Y]), size, last_vote_mm=self.height.last_vote_mm,
+                             vote_step_mm=cfg.height_vote_step_mm, leading_mm=self.height.leading_mm)
         # Being refined: the size and height as the track's views tell them together.
         (length, width, _), cov = self.height.shape()
         sigma = np.sqrt(np.maximum(np.diag(cov), [cfg.known_size_sigma_mm**2] * 2 + [cfg.known_height_sigma_mm**2]))
