@@ -282,3 +282,17 @@ def test_flat_parts_on_a_textured_moving_belt_keep_their_tracks_and_flat_poses()
             if o["measured"] and o["height_mm"] == 0.0:
                 flat.append(min(_centroid_mm(o, t) for t in truth["objects"] if t is not None))
     assert len(flat) >= 10 and np.mean(flat) <= 0.6, flat
+
+
+def test_a_young_track_votes_only_with_views_that_count():
+    """A vote fits a box at every height: a young track (its size not settled yet) is known to the
+    measurement for its vote too, so its views vote only once the part has moved track.height_vote_step_mm
+    since its last vote (10 mm per frame here: never two frames running); before, each of its first
+    frames voted and all but the first were thrown away (three frames running on this scene)."""
+    scene = _box_scene(0.0, 0.0)
+    renderer, frames = rendered(scene)
+    pipeline = Pipeline(renderer.calibration, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
+    voted = [i for i, (image, _) in enumerate(frames)
+             if any(m.trials for m in pipeline.process(i, image, scene.t_ns(i)).measurements)]
+    assert len(voted) >= 3
+    assert all(b - a >= 2 for a, b in zip(voted, voted[1:], strict=False)), voted

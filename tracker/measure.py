@@ -198,7 +198,7 @@ class Measurer:
     def _size_of(self, known: KnownPart | None) -> SizePrior | None:
         """A known part's size to lend a fit: none for a near-square part, whose sides may be taken the
         other way round."""
-        if known is None or known.size.length_mm - known.size.width_mm <= self.config.square_mm:
+        if known is None or known.size is None or known.size.length_mm - known.size.width_mm <= self.config.square_mm:
             return None
         return known.size
 
@@ -352,7 +352,8 @@ class KnownPart:
 
     x_mm: float
     y_mm: float
-    size: SizePrior
+    # None: a young track's, whose size has not settled (it lends none; it is known for its vote).
+    size: SizePrior | None
     # --part-height auto (tracker/height.py). Its height once voted on, being refined (mm, 1 sigma;
     # None: given, or still voted on), and whether this view is to tell its own too (a second fit).
     height_mm: float | None = None

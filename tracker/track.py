@@ -237,12 +237,20 @@ class Tracker:
 
     def known(self, t_ns: int, offset_mm: tuple[float, float] = (0.0, 0.0)) -> list[KnownPart]:
         """The settled parts, predicted to ``t_ns``: what the measurement may lean on, in the world frame
-        (the tracks' own moved by ``offset_mm``: see Track.known)."""
+        (the tracks' own moved by ``offset_mm``: see Track.known). With heights estimated, the young tracks
+        still voting too, without their unsettled sizes: so that their views vote only when they count
+        (a vote is a box fit at every height, and spends the frame's votes), and are posed at the height
+        leading their vote between."""
         out = []
         for track in self.tracks:
-            if track.settled(self.config) and not track.tentative and track.odd_size_since_ns is None:
+            if track.odd_size_since_ns is not None:
+                continue
+            if track.settled(self.config) and not track.tentative:
                 track.predict(t_ns, self.config)
                 out.append(track.known(self.config, offset_mm))
+            elif track.height is not None and track.height.voting:
+                track.predict(t_ns, self.config)
+                out.append(replace(track.known(self.config, offset_mm), size=None))
         return out
 
     def step(self, measurements: list[Measurement], t_ns: int) -> tuple[TrackedObject, ...]:
