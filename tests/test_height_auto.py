@@ -134,18 +134,29 @@ def test_a_flat_part_is_voted_flat_and_measured_as_flat():
     assert height.rect(m) == m.flat_rect
 
 
-def test_a_refined_height_converges_only_after_enough_views():
-    """However sure each view says it is, the height converges only after track.height_converged_views
-    views have told it (one view's certainty says how well it fits, not whether the fit is right)."""
+def _voted_20_mm() -> tuple[TrackConfig, HeightEstimate]:
+    """A part 20 mm tall voted on by as few views as decide it: now refined."""
     cfg = TrackConfig()
     height = HeightEstimate(cfg)
     for k in range(cfg.height_vote_min_views):
         x = k * cfg.height_vote_step_mm
         height.add(_view(x, _sizes(x, 20.0)), x, 0.0)
+    return cfg, height
+
+
+def _refining_view(height_mm: float) -> Measurement:
+    """A refining view that tells an 80x50 mm part of this height, each to 0.01 mm."""
+    info = np.diag([1e4, 1e4, 1e4])
+    return Measurement(Rect(0.0, 0.0, 0.0, 80.0, 50.0), False, (0, 0, 1, 1), (0.0, 0.0), 40,
+                       shape_info=info, shape_vec=info @ np.array([80.0, 50.0, height_mm]))
+
+
+def test_a_refined_height_converges_only_after_enough_views():
+    """However sure each view says it is, the height converges only after track.height_converged_views
+    views have told it (one view's certainty says how well it fits, not whether the fit is right)."""
+    cfg, height = _voted_20_mm()
     assert not height.voting
-    info = np.diag([1e4, 1e4, 1e4])  # each view: 0.01 mm on length, width and height
-    sure = Measurement(Rect(0.0, 0.0, 0.0, 80.0, 50.0), False, (0, 0, 1, 1), (0.0, 0.0), 40,
-                       shape_info=info, shape_vec=info @ np.array([80.0, 50.0, 20.0]))
+    sure = _refining_view(20.0)
     converged = []
     for _ in range(cfg.height_converged_views):
         height.add(sure, 0.0, 0.0)
@@ -159,31 +170,18 @@ def test_views_that_scatter_more_than_they_claim_converge_only_as_their_scatter_
     (each within the gate): the estimate is as unsure as their scatter says, so it converges later
     (measured: after 9 views) than views that agree as well as they claim (5: the test above), and
     on their mean."""
-    cfg = TrackConfig()
-    height = HeightEstimate(cfg)
-    for k in range(cfg.height_vote_min_views):
-        x = k * cfg.height_vote_step_mm
-        height.add(_view(x, _sizes(x, 20.0)), x, 0.0)
-    info = np.diag([1e4, 1e4, 1e4])
+    cfg, height = _voted_20_mm()
     converged = []
     for k in range(4 * cfg.height_converged_views):
-        h = 20.0 + (1.5 if k % 2 else -1.5)
-        height.add(Measurement(Rect(0.0, 0.0, 0.0, 80.0, 50.0), False, (0, 0, 1, 1), (0.0, 0.0), 40,
-                               shape_info=info, shape_vec=info @ np.array([80.0, 50.0, h])), 0.0, 0.0)
+        height.add(_refining_view(20.0 + (1.5 if k % 2 else -1.5)), 0.0, 0.0)
         converged.append(height.converged)
     assert not any(converged[:cfg.height_converged_views + 2]) and converged[-1], converged
     assert height.height_mm == pytest.approx(20.0, abs=0.2)
 
 
 def test_a_view_that_disagrees_is_left_out_and_many_start_the_vote_again():
-    cfg = TrackConfig()
-    height = HeightEstimate(cfg)
-    for k in range(cfg.height_vote_min_views):
-        x = k * cfg.height_vote_step_mm
-        height.add(_view(x, _sizes(x, 20.0)), x, 0.0)
-    info = np.diag([1e4, 1e4, 1e4])
-    wrong = Measurement(Rect(0.0, 0.0, 0.0, 80.0, 50.0), False, (0, 0, 1, 1), (0.0, 0.0), 40,
-                        shape_info=info, shape_vec=info @ np.array([80.0, 50.0, 35.0]))
+    cfg, height = _voted_20_mm()
+    wrong = _refining_view(35.0)
     for _ in range(cfg.view_gate_frames - 1):
         height.add(wrong, 0.0, 0.0)
         assert height.height_mm == pytest.approx(20.0, abs=0.5)  # left out

@@ -46,6 +46,12 @@ if TYPE_CHECKING:
     from tracker.measure import Measurement
 
 
+def vote_due(last_vote_mm: tuple[float, float] | None, x_mm: float, y_mm: float, step_mm: float) -> bool:
+    """Whether a view seen at (x, y) votes: the first, or ``step_mm`` or more from the last vote's view
+    (world frame, mm)."""
+    return last_vote_mm is None or math.dist(last_vote_mm, (x_mm, y_mm)) >= step_mm
+
+
 @dataclass(frozen=True)
 class HeightTrial:
     """One view fitted as a box of one height, its size free."""
@@ -103,8 +109,7 @@ class HeightEstimate:
     def wants_vote(self, x_mm: float, y_mm: float) -> bool:
         """Whether a view of the part seen at (x, y) (world frame) would vote: the first, or far enough
         from the last."""
-        return self.voting and (self._last_vote_mm is None or
-                                math.dist(self._last_vote_mm, (x_mm, y_mm)) >= self._cfg.height_vote_step_mm)
+        return self.voting and vote_due(self.last_vote_mm, x_mm, y_mm, self._cfg.height_vote_step_mm)
 
     @property
     def wants_refine(self) -> bool:

@@ -23,7 +23,7 @@ from tracker.boxfit import CONVERGED_STEPS, PRECISE_STEPS, BoxFit, SizePrior, fi
 from tracker.calibration import apply_homography
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
-from tracker.height import HeightTrial
+from tracker.height import HeightTrial, vote_due
 from tracker.split import SplitRule, split_blob
 from tracker.undistort import BeltMapper
 
@@ -157,7 +157,7 @@ class Measurer:
             # Undistorted once: the rectangle on the belt and a box's fit both start from them.
             points_norm = self.mapper.to_norm(points_px)
             pts_mm = self.mapper.norm_to_mm(points_norm)
-            rect = view = refine_rect(pts_mm, min_area_rect(pts_mm), band=cfg.side_band_px * self._mm_per_px)
+            rect = view = self._rect_of(pts_mm)
             known = self._known_part(rect) if self._boxes else None
             if known is not None and known.flat:
                 rect = self._flat_rect(edges, hull_mm)  # found flat (--part-height auto): measured as flat
@@ -183,10 +183,14 @@ class Measurer:
         box's are read against the face next to each edge, which on a flat part is a blurred mix); with
         too little contrast for that, its outline's rectangle (``hull_mm``), as flat mode falls back to."""
         crossings = (edges.rows, edges.cols)
-        if any(len(c.rows) and np.min(np.abs(edges.part_level - c.belt)) < self.config.min_contrast for c in crossings):
+        if any(c.low_contrast(edges.part_level, self.config.min_contrast) for c in crossings):
             return min_area_rect(hull_mm)
-        flat = [c.points(edges.part_level) for c in crossings]
-        pts_mm = self.mapper.to_mm(np.concatenate([flat[0], flat[1][:, ::-1]]) + edges.origin)
+        flat = _edge_points_of(edges.rows, edges.cols, (edges.part_level, edges.part_level))
+        pts_mm = self.mapper.to_mm(flat + edges.origin)
+        return self._rect_of(pts_mm)
+
+    def _rect_of(self, pts_mm: np.ndarray) -> Rect:
+        """The rectangle of edge points on a plane (mm): the least-area one, its sides refined."""
         return refine_rect(pts_mm, min_area_rect(pts_mm), band=self.config.side_band_px * self._mm_per_px)
 
     def _known_part(self, rect: Rect) -> KnownPart | None:
@@ -291,7 +295,7 @@ class Measurer:
             if height_mm in self.config.height_starts_mm:  # a refined height is new every frame: not kept
                 self._plane_homographies[height_mm] = homography
         pts = apply_homography(homography, points_norm)
-        return refine_rect(pts, min_area_rect(pts), band=self.config.side_band_px * self._mm_per_px)
+        return self._rect_of(pts)
 
     def _edge_points(self, frame, reference, contour, bbox, blocked=None) -> _Edges | None:
         """Sub-pixel edge points (Nx2 px); ``blocked``: window pixels of other parts, which no edge's
@@ -320,10 +324,9 @@ class Measurer:
         rows = _boundary_crossings(img8, belt_level, inside, k, blocked)
         cols = _boundary_crossings(img8.T, belt_level.T, inside.T, k, None if blocked is None else blocked.T)
         levels = [c.face_levels(k) if self._boxes else part_level for c in (rows, cols)]
-        for c, level in zip((rows, cols), levels, strict=True):
-            if len(c.rows) and np.min(np.abs(np.reshape(level, (-1, 1)) - c.belt)) < cfg.min_contrast:
-                return None  # too little contrast to trust
-        points = np.concatenate([rows.points(levels[0]), cols.points(levels[1])[:, ::-1]])
+        if any(c.low_contrast(level, cfg.min_contrast) for c, level in zip((rows, cols), levels, strict=True)):
+            return None  # too little contrast to trust
+        points = _edge_points_of(rows, cols, levels)
         if len(points) == 0:
             return None
         return _Edges(points + [x0, y0], rows, cols, (x0, y0), tuple(levels), part_level)
@@ -368,9 +371,8 @@ class KnownPart:
     leading_mm: float | None = None
 
     def votes_at(self, x_mm: float, y_mm: float) -> bool:
-        """Whether a view of it seen at (x, y) (world frame) votes: the first, or far enough from the last
-        (as HeightEstimate.wants_vote judges the same view)."""
-        return self.last_vote_mm is None or math.dist(self.last_vote_mm, (x_mm, y_mm)) >= self.vote_step_mm
+        """Whether a view of it seen at (x, y) (world frame) votes (as HeightEstimate.wants_vote judges it)."""
+        return vote_due(self.last_vote_mm, x_mm, y_mm, self.vote_step_mm)
 
 
 @dataclass(frozen=True)
@@ -383,6 +385,12 @@ class _Edges:
     origin: tuple[int, int]  # the examined window's first pixel (x0, y0)
     levels: tuple  # the part's level each set of windows was read against (per window, or one)
     part_level: float  # the part's own level (its inner pixels' median)
+
+
+def _edge_points_of(rows: _Crossings, cols: _Crossings, levels: tuple) -> np.ndarray:
+    """The edge points (Nx2: x, y in the examined window) of the row and column crossings, each read
+    against its level (per window, or one)."""
+    return np.concatenate([rows.points(levels[0]), cols.points(levels[1])[:, ::-1]])
 
 
 def _size_variances(fit: BoxFit) -> tuple[float, float]:
@@ -419,6 +427,11 @@ class _Crossings:
     rising: np.ndarray  # (N,) bool: the part lies on the window's high side (a left edge)
     image: np.ndarray  # (N, 2k) grey levels
     belt: np.ndarray  # (N, 2k) the belt's level under them
+
+    def low_contrast(self, level: np.ndarray | float, min_contrast: float) -> bool:
+        """Whether the part's level (per window, or one) differs from the belt under some window by less
+        than ``min_contrast``: too little to read its edge from."""
+        return bool(len(self.rows)) and float(np.min(np.abs(np.reshape(level, (-1, 1)) - self.belt))) < min_contrast
 
     def points(self, level: np.ndarray | float) -> np.ndarray:
         """Where the edge crosses each row (Nx2: col, row), the part's level given per window or once."""

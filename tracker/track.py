@@ -243,14 +243,12 @@ class Tracker:
         leading their vote between."""
         out = []
         for track in self.tracks:
-            if track.odd_size_since_ns is not None:
-                continue
-            if track.settled(self.config) and not track.tentative:
+            settled = track.settled(self.config) and not track.tentative
+            voting = track.height is not None and track.height.voting
+            if track.odd_size_since_ns is None and (settled or voting):
                 track.predict(t_ns, self.config)
-                out.append(track.known(self.config, offset_mm))
-            elif track.height is not None and track.height.voting:
-                track.predict(t_ns, self.config)
-                out.append(replace(track.known(self.config, offset_mm), size=None))
+                known = track.known(self.config, offset_mm)
+                out.append(known if settled else replace(known, size=None))
         return out
 
     def step(self, measurements: list[Measurement], t_ns: int) -> tuple[TrackedObject, ...]:
