@@ -103,6 +103,10 @@ class MeasureConfig:
     side_band_px: float = 1.5
     # Minimum |part - belt| contrast (grey levels) for a sub-pixel measurement.
     min_contrast: float = 20.0
+    # A box's edges are read against the face next to each (one pixel): windows where the belt comes
+    # within min_contrast of it are left out, up to this fraction of them (a side of the outline holds
+    # a quarter or more: beyond, one may be missing, and the blob's edges are not read from levels).
+    max_unreadable_fraction: float = 0.15
     # Estimate each part's height from how its silhouette changes as it crosses the view (boxes of
     # several heights fitted to views along its path, the height whose sizes agree kept, then refined;
     # see tracker/height.py). What --part-height auto turns on.
@@ -141,6 +145,8 @@ class MeasureConfig:
         if self.estimate_height and self.part_height_mm > 0:
             raise BadInput(f"measure: expected a part height given (part_height_mm) or estimated (estimate_height), "
                            f"got both (part_height_mm {self.part_height_mm:g})")
+        if not 0 <= self.max_unreadable_fraction < 1:
+            raise BadInput(f"measure.max_unreadable_fraction: expected 0 <= f < 1, got {self.max_unreadable_fraction}")
         if not 0 <= self.edge_blur_px <= 5:
             raise BadInput(f"measure.edge_blur_px: expected a blur from 0 to 5 px, got {self.edge_blur_px}")
         try:

@@ -323,13 +323,29 @@ class Measurer:
         k = HALF_WINDOW_PX
         rows = _boundary_crossings(img8, belt_level, inside, k, blocked)
         cols = _boundary_crossings(img8.T, belt_level.T, inside.T, k, None if blocked is None else blocked.T)
-        levels = [c.face_levels(k) if self._boxes else part_level for c in (rows, cols)]
-        if any(c.low_contrast(level, cfg.min_contrast) for c, level in zip((rows, cols), levels, strict=True)):
-            return None  # too little contrast to trust
+        if self._boxes:
+            rows, cols = (self._readable(c, k) for c in (rows, cols))
+            if rows is None or cols is None:
+                return None
+            levels = [c.face_levels(k) for c in (rows, cols)]
+        else:
+            levels = [part_level, part_level]
+            if any(c.low_contrast(part_level, cfg.min_contrast) for c in (rows, cols)):
+                return None  # too little contrast to trust
         points = _edge_points_of(rows, cols, levels)
         if len(points) == 0:
             return None
         return _Edges(points + [x0, y0], rows, cols, (x0, y0), tuple(levels), part_level)
+
+    def _readable(self, crossings: _Crossings, half_window: int) -> _Crossings | None:
+        """A box's windows whose face (one pixel, see _Crossings.face_levels) differs enough from the belt
+        under them to read the edge from: on a textured belt the belt under a few windows comes near
+        it, and those are left out; None when more than measure.max_unreadable_fraction are (a side
+        of the outline may then be missing, and with it the part's size)."""
+        readable = crossings.readable(crossings.face_levels(half_window), self.config.min_contrast)
+        if len(readable) and 1.0 - readable.mean() > self.config.max_unreadable_fraction:
+            return None
+        return crossings.subset(readable)
 
     def _windows(self, edges: _Edges) -> EdgeWindows:
         """The edge windows for the box fit, each read against the face next to its edge."""
@@ -431,7 +447,16 @@ class _Crossings:
     def low_contrast(self, level: np.ndarray | float, min_contrast: float) -> bool:
         """Whether the part's level (per window, or one) differs from the belt under some window by less
         than ``min_contrast``: too little to read its edge from."""
-        return bool(len(self.rows)) and float(np.min(np.abs(np.reshape(level, (-1, 1)) - self.belt))) < min_contrast
+        return not bool(np.all(self.readable(level, min_contrast)))
+
+    def readable(self, level: np.ndarray | float, min_contrast: float) -> np.ndarray:
+        """(N,) bool: where the part's level (per window, or one) differs from the belt under every pixel
+        of the window by ``min_contrast`` or more."""
+        return np.min(np.abs(np.reshape(level, (-1, 1)) - self.belt), axis=1, initial=np.inf) >= min_contrast
+
+    def subset(self, keep: np.ndarray) -> _Crossings:
+        """The windows where ``keep`` (N,) holds."""
+        return _Crossings(self.rows[keep], self.first_col[keep], self.rising[keep], self.image[keep], self.belt[keep])
 
     def points(self, level: np.ndarray | float) -> np.ndarray:
         """Where the edge crosses each row (Nx2: col, row), the part's level given per window or once."""
