@@ -33,6 +33,8 @@ HALF_WINDOW_PX = 3
 _STEEP_RATIO = 0.5
 _ERODE = cv2.getStructuringElement(cv2.MORPH_RECT, (5, 5))
 _ZONE = cv2.getStructuringElement(cv2.MORPH_RECT, (7, 7))
+# Fewer sub-pixel edge points than this: the blob is measured from its pixel staircase.
+_MIN_EDGE_POINTS = 12
 
 
 @dataclass(frozen=True)
@@ -143,28 +145,37 @@ class Measurer:
         hull_mm = self.mapper.to_mm(cv2.convexHull(contour).reshape(-1, 2))
         if cv2.contourArea(hull_mm.astype(np.float32)) < cfg.min_area_mm2:
             return None
-        edges = box = None
+        box = known = None
         trials: tuple[HeightTrial, ...] = ()
         flat_rect = None
+        crossed = None
         if cfg.subpixel and not clipped:
-            edges = self._edge_points(frame, reference, contour, (x, y, w, h), others)
-        if edges is None or len(edges.points_px) < 12:
-            # Binary staircase: boundary pixel centres sit half a pixel inside the edge.
-            points_px = contour.reshape(-1, 2).astype(np.float64)
-            rect = view = min_area_rect(hull_mm)
+            crossed = self._crossings(frame, reference, contour, (x, y, w, h), others)
+        # Binary staircase unless its edges read: boundary pixel centres sit half a pixel inside the edge.
+        points_px = contour.reshape(-1, 2).astype(np.float64)
+        rect = view = min_area_rect(hull_mm)
+        if not self._boxes:
+            flat = None if crossed is None else self._flat_points(crossed)
+            if flat is not None:
+                points_px, rect = flat, self._rect_of(self.mapper.to_mm(flat))
+                view = rect
         else:
-            points_px = edges.points_px
-            # Undistorted once: the rectangle on the belt and a box's fit both start from them.
-            points_norm = self.mapper.to_norm(points_px)
-            pts_mm = self.mapper.norm_to_mm(points_norm)
-            rect = view = self._rect_of(pts_mm)
-            known = self._known_part(rect) if self._boxes else None
+            edges = None if crossed is None else self._box_edges(crossed)
+            if cfg.estimate_height and crossed is not None:
+                flat_rect = self._flat_rect(crossed, hull_mm)
+            if edges is not None:
+                points_px = edges.points_px
+                # Undistorted once: the rectangle on the belt and a box's fit both start from them.
+                points_norm = self.mapper.to_norm(points_px)
+                rect = view = self._rect_of(self.mapper.norm_to_mm(points_norm))
+            elif flat_rect is not None:
+                rect = view = flat_rect  # no box reads from these edges: measured as flat parts are
+            known = self._known_part(rect)
             if known is not None and known.flat:
-                rect = self._flat_rect(edges, hull_mm)  # found flat (--part-height auto): measured as flat
-            elif self._boxes:
+                # Found flat (--part-height auto): measured as flat mode measures it.
+                rect = flat_rect or min_area_rect(hull_mm)
+            elif edges is not None:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
-                if cfg.estimate_height:
-                    flat_rect = self._flat_rect(edges, hull_mm)
                 box, trials = self._fit_box(points_norm, self._windows(edges), rect, known)
                 if box is not None:
                     rect = box.rect
@@ -178,16 +189,21 @@ class Measurer:
                            shape_info=None if box is None else box.shape_info,
                            shape_vec=None if box is None else box.shape_vec)
 
-    def _flat_rect(self, edges: _Edges, hull_mm: np.ndarray) -> Rect:
-        """The blob measured as a flat part always is: its edges read against the part's own level (a
-        box's are read against the face next to each edge, which on a flat part is a blurred mix); with
-        too little contrast for that, its outline's rectangle (``hull_mm``), as flat mode falls back to."""
-        crossings = (edges.rows, edges.cols)
-        if any(c.low_contrast(edges.part_level, self.config.min_contrast) for c in crossings):
-            return min_area_rect(hull_mm)
-        flat = _edge_points_of(edges.rows, edges.cols, (edges.part_level, edges.part_level))
-        pts_mm = self.mapper.to_mm(flat + edges.origin)
-        return self._rect_of(pts_mm)
+    def _flat_rect(self, crossed: _Crossed, hull_mm: np.ndarray) -> Rect:
+        """The blob measured as a flat part always is (a box's edges are read against the face next to
+        each edge, which on a flat part is a blurred mix): from its edges read against the part's own
+        level, or with too little contrast for that, its outline's rectangle (``hull_mm``)."""
+        flat = self._flat_points(crossed)
+        return min_area_rect(hull_mm) if flat is None else self._rect_of(self.mapper.to_mm(flat))
+
+    def _flat_points(self, crossed: _Crossed) -> np.ndarray | None:
+        """Sub-pixel edge points (Nx2 px) read against the part's own level (a flat part's, uniform);
+        None where some window has too little contrast to trust, or too few read."""
+        level = crossed.part_level
+        if any(c.low_contrast(level, self.config.min_contrast) for c in (crossed.rows, crossed.cols)):
+            return None
+        points = _edge_points_of(crossed.rows, crossed.cols, (level, level))
+        return points + crossed.origin if len(points) >= _MIN_EDGE_POINTS else None
 
     def _rect_of(self, pts_mm: np.ndarray) -> Rect:
         """The rectangle of edge points on a plane (mm): the least-area one, its sides refined."""
@@ -297,10 +313,10 @@ class Measurer:
         pts = apply_homography(homography, points_norm)
         return self._rect_of(pts)
 
-    def _edge_points(self, frame, reference, contour, bbox, blocked=None) -> _Edges | None:
-        """Sub-pixel edge points (Nx2 px); ``blocked``: window pixels of other parts, which no edge's
-        window may reach (there the next part is no belt)."""
-        cfg = self.config
+    def _crossings(self, frame, reference, contour, bbox, blocked=None) -> _Crossed | None:
+        """The windows across the blob's boundary and the part's level; ``blocked``: window pixels of
+        other parts, which no edge's window may reach (there the next part is no belt). None: too little
+        belt or part in the window to read levels from."""
         x0, y0, x1, y1 = self._window(bbox)
         img8 = frame[y0:y1, x0:x1]
         ref = reference[y0:y1, x0:x1].astype(np.float32)
@@ -316,26 +332,24 @@ class Measurer:
         # Lighting gain of this frame against the reference, from the belt around the blob.
         gain = _median_u8(img8, belt) / max(_median_u8(cv2.convertScaleAbs(ref), belt), 1.0)
         belt_level = gain * ref
-        # The part's level: uniform for a flat part; a box's side faces are shaded unlike its top,
-        # so there each edge is first read against the face next to it (a start for the box fit).
-        part_level = _median_u8(img8, inner)
         inside = piece > 0
         k = HALF_WINDOW_PX
         rows = _boundary_crossings(img8, belt_level, inside, k, blocked)
         cols = _boundary_crossings(img8.T, belt_level.T, inside.T, k, None if blocked is None else blocked.T)
-        if self._boxes:
-            rows, cols = (self._readable(c, k) for c in (rows, cols))
-            if rows is None or cols is None:
-                return None
-            levels = [c.face_levels(k) for c in (rows, cols)]
-        else:
-            levels = [part_level, part_level]
-            if any(c.low_contrast(part_level, cfg.min_contrast) for c in (rows, cols)):
-                return None  # too little contrast to trust
-        points = _edge_points_of(rows, cols, levels)
-        if len(points) == 0:
+        return _Crossed(rows, cols, (x0, y0), _median_u8(img8, inner))
+
+    def _box_edges(self, crossed: _Crossed) -> _Edges | None:
+        """A box's sub-pixel edge points, each read against the face next to its edge (its side faces are
+        shaded unlike its top: a start for the box fit); None where too few read."""
+        k = HALF_WINDOW_PX
+        rows, cols = (self._readable(c, k) for c in (crossed.rows, crossed.cols))
+        if rows is None or cols is None:
             return None
-        return _Edges(points + [x0, y0], rows, cols, (x0, y0), tuple(levels), part_level)
+        levels = (rows.face_levels(k), cols.face_levels(k))
+        points = _edge_points_of(rows, cols, levels)
+        if len(points) < _MIN_EDGE_POINTS:
+            return None
+        return _Edges(points + crossed.origin, rows, cols, crossed.origin, levels)
 
     def _readable(self, crossings: _Crossings, half_window: int) -> _Crossings | None:
         """A box's windows whose face (one pixel, see _Crossings.face_levels) differs enough from the belt
@@ -392,15 +406,24 @@ class KnownPart:
 
 
 @dataclass(frozen=True)
-class _Edges:
-    """A blob's sub-pixel edge points and the windows they were read from."""
+class _Crossed:
+    """The windows across a blob's boundary, before they are read."""
 
-    points_px: np.ndarray  # (N, 2) whole-frame pixels
     rows: _Crossings
     cols: _Crossings  # transposed: their "rows" are columns
     origin: tuple[int, int]  # the examined window's first pixel (x0, y0)
-    levels: tuple  # the part's level each set of windows was read against (per window, or one)
     part_level: float  # the part's own level (its inner pixels' median)
+
+
+@dataclass(frozen=True)
+class _Edges:
+    """A box's sub-pixel edge points and the windows they were read from."""
+
+    points_px: np.ndarray  # (N, 2) whole-frame pixels
+    rows: _Crossings
+    cols: _Crossings
+    origin: tuple[int, int]
+    levels: tuple[np.ndarray, np.ndarray]  # the face each window was read against (per window)
 
 
 def _edge_points_of(rows: _Crossings, cols: _Crossings, levels: tuple) -> np.ndarray:
