@@ -37,11 +37,12 @@ def test_the_box_faces_give_the_footprint(height_mm, tilt_deg):
     scene = _box_scene(height_mm, tilt_deg)
     given, poses = _summary(scene, height_mm)
     flat, _ = _summary(scene, 0.0)
-    # A frame or two is missed where the part touches the view's edge (tilted: 20 frames at 10 mm).
-    assert given["missed_frames"] <= (20 if (height_mm, tilt_deg) == (10, 20) else 4), given
+    # In view at the start (partly), it is measured from its first whole view (reference.py's start-up).
+    assert given["missed_frames"] == 0, given
     # Thin parts' side faces are slivers whose shade trades with their edge: a little less exact, and
-    # their size is learnt over more views (the first few leave it open by up to 0.8 mm).
-    bound_mm, p95_mm, size_mm = (0.12, 0.35, 1.0) if height_mm < 20 else (0.05, 0.15, 0.5)
+    # their size is learnt over more views (the first few, at the view's edge, leave it open by up to
+    # 0.8 mm: 0.5-0.65 mm off in the first four at 5 mm and 20 deg, frames missed before).
+    bound_mm, p95_mm, size_mm = (0.12, 0.4, 1.0) if height_mm < 20 else (0.05, 0.15, 0.5)
     assert given["centroid_mean_mm"] <= bound_mm and given["centroid_p95_mm"] <= p95_mm, given
     assert given["angle_mean_deg"] <= 0.05, given
     assert given["length_max_mm"] <= size_mm and given["width_max_mm"] <= size_mm, given
