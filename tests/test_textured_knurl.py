@@ -100,7 +100,8 @@ def test_nothing_outside_the_region_of_interest_is_a_part():
 def test_boxes_on_the_knurled_belt_with_their_height_given():
     """A box's edges are read against the face next to each, one pixel, and the knurl's bright diamonds
     come within min_contrast of the dark part's face in a few windows: those windows are left out, the
-    rest read (before, any one of them sent the whole blob to its pixel staircase: 0.57 mm, 0.22 deg)."""
+    rest read (before, any one of them sent the whole blob to its pixel staircase: 0.57 mm, 0.22 deg;
+    now 0.13 mm, 0.06 deg)."""
     scene = _scene()
     scene = dataclasses.replace(scene, parts=tuple(dataclasses.replace(p, height_mm=10.0) for p in scene.parts))
     _, frames = rendered(scene)
@@ -108,4 +109,4 @@ def test_boxes_on_the_knurled_belt_with_their_height_given():
     poses, truths, _ = _run(scene, [f for f, _ in frames], config)
     s = evaluate(poses, truths, skip_first=3).summary()
     assert s["false_objects"] == 0 and s["missed_frames"] <= 3, s
-    assert s["centroid_mean_mm"] <= 0.3 and s["angle_mean_deg"] <= 0.12, s
+    assert s["centroid_mean_mm"] <= 0.2 and s["angle_mean_deg"] <= 0.1, s

@@ -27,6 +27,12 @@ class SegmentConfig:
     # A foreground blob with no motion in it for this many frames joins the background
     # (a parked part, or a ghost left where a part sat when the reference was taken).
     absorb_after_frames: int = 90
+    # Start-up (plain belt model): where the first frame is unlike the belt's level it may hold parts,
+    # and the belt's level stands in for it; for at most this many frames (then what is left is taken
+    # as the frame shows it), and unless more than this fraction of the region of interest is unlike
+    # the belt (the view is then not mostly belt: the first frame is taken as it is).
+    startup_frames: int = 30
+    startup_max_fraction: float = 0.3
     # Side of the square opening kernel that removes noise speckles from the mask.
     open_kernel_px: int = 3
     # Belt model: "reference" (a per-pixel image of the empty belt: exact on plain belts whose
@@ -63,7 +69,7 @@ class SegmentConfig:
     min_part_mm: float = 0.0
 
     def __post_init__(self) -> None:
-        _positive(self, "diff_threshold", "motion_threshold", "background_every",
+        _positive(self, "diff_threshold", "motion_threshold", "background_every", "startup_frames",
                   "absorb_after_frames", "open_kernel_px", "max_blobs", "textured_work_px",
                   "textured_threshold", "textured_sigmas", "min_part_contrast")
         if self.model not in SEGMENT_MODELS:
@@ -74,6 +80,8 @@ class SegmentConfig:
             _check_polygon(f"segment.{name}", getattr(self, name))
             # Tuples: the settings stay hashable and compare equal however they were given.
             object.__setattr__(self, name, tuple(tuple(float(v) for v in p) for p in getattr(self, name)))
+        if not 0 <= self.startup_max_fraction <= 1:
+            raise BadInput(f"segment.startup_max_fraction: expected 0 <= f <= 1, got {self.startup_max_fraction}")
         if not 0 < self.scene_fault_fraction <= 1:
             raise BadInput(f"segment.scene_fault_fraction: expected 0 < f <= 1, got {self.scene_fault_fraction}")
         if self.min_part_mm < 0:
@@ -104,8 +112,10 @@ class MeasureConfig:
     # Minimum |part - belt| contrast (grey levels) for a sub-pixel measurement.
     min_contrast: float = 20.0
     # A box's edges are read against the face next to each (one pixel): windows where the belt comes
-    # within min_contrast of it are left out, up to this fraction of them (a side of the outline holds
-    # a quarter or more: beyond, one may be missing, and the blob's edges are not read from levels).
+    # within min_contrast of it are left out, up to this fraction of those on one side of the blob (its
+    # left edges along rows, say: there a part's side holds a quarter or more of them unless it is
+    # longer than 3:1 and turned near 45 deg; beyond, a side may be missing, and the blob's edges are
+    # not read from levels).
     max_unreadable_fraction: float = 0.15
     # Estimate each part's height from how its silhouette changes as it crosses the view (boxes of
     # several heights fitted to views along its path, the height whose sizes agree kept, then refined;

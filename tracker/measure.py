@@ -161,8 +161,13 @@ class Measurer:
                 view = rect
         else:
             edges = None if crossed is None else self._box_edges(crossed)
+            flat = None
             if cfg.estimate_height and crossed is not None:
-                flat_rect = self._flat_rect(crossed, hull_mm)
+                # The blob measured as a flat part always is (a box's edges are read against the face
+                # next to each, which on a flat part is a blurred mix), or with too little contrast for
+                # that, as its outline's rectangle: the pose of a part its track finds flat.
+                flat = self._flat_points(crossed)
+                flat_rect = min_area_rect(hull_mm) if flat is None else self._rect_of(self.mapper.to_mm(flat))
             if edges is not None:
                 points_px = edges.points_px
                 # Undistorted once: the rectangle on the belt and a box's fit both start from them.
@@ -173,7 +178,8 @@ class Measurer:
             known = self._known_part(rect)
             if known is not None and known.flat:
                 # Found flat (--part-height auto): measured as flat mode measures it.
-                rect = flat_rect or min_area_rect(hull_mm)
+                rect = view = flat_rect or min_area_rect(hull_mm)
+                points_px = contour.reshape(-1, 2).astype(np.float64) if flat is None else flat
             elif edges is not None:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
                 box, trials = self._fit_box(points_norm, self._windows(edges), rect, known)
@@ -188,13 +194,6 @@ class Measurer:
                            size_cov_mm2=None if box is None else box.size_cov_mm2, flat_rect=flat_rect, trials=trials,
                            shape_info=None if box is None else box.shape_info,
                            shape_vec=None if box is None else box.shape_vec)
-
-    def _flat_rect(self, crossed: _Crossed, hull_mm: np.ndarray) -> Rect:
-        """The blob measured as a flat part always is (a box's edges are read against the face next to
-        each edge, which on a flat part is a blurred mix): from its edges read against the part's own
-        level, or with too little contrast for that, its outline's rectangle (``hull_mm``)."""
-        flat = self._flat_points(crossed)
-        return min_area_rect(hull_mm) if flat is None else self._rect_of(self.mapper.to_mm(flat))
 
     def _flat_points(self, crossed: _Crossed) -> np.ndarray | None:
         """Sub-pixel edge points (Nx2 px) read against the part's own level (a flat part's, uniform);
@@ -354,11 +353,13 @@ class Measurer:
     def _readable(self, crossings: _Crossings, half_window: int) -> _Crossings | None:
         """A box's windows whose face (one pixel, see _Crossings.face_levels) differs enough from the belt
         under them to read the edge from: on a textured belt the belt under a few windows comes near
-        it, and those are left out; None when more than measure.max_unreadable_fraction are (a side
-        of the outline may then be missing, and with it the part's size)."""
+        it, and those are left out; None when more than measure.max_unreadable_fraction of those on
+        one side of the blob (its left or right edges along rows, say) are (a side of the outline may
+        then be missing, and with it the part's size)."""
         readable = crossings.readable(crossings.face_levels(half_window), self.config.min_contrast)
-        if len(readable) and 1.0 - readable.mean() > self.config.max_unreadable_fraction:
-            return None
+        for side in (crossings.rising, ~crossings.rising):
+            if side.any() and 1.0 - readable[side].mean() > self.config.max_unreadable_fraction:
+                return None
         return crossings.subset(readable)
 
     def _windows(self, edges: _Edges) -> EdgeWindows:

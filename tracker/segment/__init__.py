@@ -32,4 +32,4 @@ def make_segmenter(config: SegmentConfig, roi: np.ndarray, mm_per_px: float = 1.
     belt's scale at the image centre."""
     if config.model == "textured":
         return TexturedSegmenter(config, roi, mm_per_px)
-    return Segmenter(config)
+    return Segmenter(config, roi)

@@ -29,8 +29,10 @@ class Segmenter:
     of a spike every few frames.
     """
 
-    def __init__(self, config: SegmentConfig) -> None:
+    def __init__(self, config: SegmentConfig, roi: np.ndarray | None = None) -> None:
+        """``roi``: the region of interest (uint8 mask; None: the whole frame), where the belt's level is read."""
         self.config = config
+        self._roi = roi
         self._kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (config.open_kernel_px,) * 2)
         self._guard = cv2.getStructuringElement(cv2.MORPH_RECT, (_GUARD_PX, _GUARD_PX))
         self._count = 0
@@ -48,16 +50,7 @@ class Segmenter:
     def __call__(self, frame: np.ndarray) -> np.ndarray:
         cfg = self.config
         if self.reference is None:
-            # The first frame is the reference, except where it is unlike the belt's level (its median:
-            # parts cover less than half of it): there it may hold a part, and the belt's level stands
-            # in until the pixel shows what it holds (see _start_up).
-            level = np.full_like(frame, round(_median_level(frame)))
-            self._suspect = cv2.threshold(cv2.absdiff(frame, level), cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1]
-            self.background = np.where(self._suspect > 0, level, frame)
-            self.reference = self.background.astype(np.float32)
-            self._still_steps = np.zeros(frame.shape, dtype=np.uint8)
-            self._prev = frame
-            self._count = 1
+            self._first(frame)
             return np.zeros(frame.shape, dtype=np.uint8)
         _, fg = cv2.threshold(cv2.absdiff(frame, self.background), cfg.diff_threshold, 255, cv2.THRESH_BINARY)
         if self._suspect is not None:
@@ -70,14 +63,37 @@ class Segmenter:
         self._count += 1
         return mask
 
+    def _first(self, frame: np.ndarray) -> None:
+        """The first frame is the reference, except where it is unlike the belt's level (its median over
+        the region of interest: parts cover less than half of it) and around there (blurred edges): there
+        it may hold a part, and the belt's level stands in until each pixel shows what it holds (see
+        _start_up). Unlike it over more than segment.startup_max_fraction of the region, the view is not
+        mostly belt (a region of interest would say where the belt is): the first frame as it is."""
+        cfg = self.config
+        level = np.full_like(frame, round(_median_level(frame, self._roi)))
+        suspect = cv2.threshold(cv2.absdiff(frame, level), cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1]
+        if self._roi is not None:
+            suspect = cv2.bitwise_and(suspect, self._roi)
+        area = frame.size if self._roi is None else cv2.countNonZero(self._roi)
+        if cv2.countNonZero(suspect) > cfg.startup_max_fraction * area:
+            suspect = np.zeros_like(suspect)
+        suspect = cv2.dilate(suspect, self._guard)
+        self._suspect = suspect if cv2.countNonZero(suspect) else None
+        self.background = np.where(suspect > 0, level, frame)
+        self.reference = self.background.astype(np.float32)
+        self._still_steps = np.zeros(frame.shape, dtype=np.uint8)
+        self._prev = frame
+        self._count = 1
+
     def _start_up(self, frame: np.ndarray, fg: np.ndarray) -> np.ndarray:
-        """``fg`` while the first frame's pixels unlike the belt's level are suspect (see __call__): it
-        may have held parts, and there the reference is the belt's level until shown otherwise. A part
-        in view at the start is then whole from the first frames (against that frame it would be only
-        what it has uncovered since, and where it was, a ghost). A suspect pixel that shows the belt
-        and does not move is belt: its own level joins the reference. A blob of suspect pixels alone
-        that does not move is what lay there from the start (a rail, a stain, a parked part): it joins
-        the reference too, as it would have from the first frame."""
+        """``fg`` while the first frame's pixels unlike the belt's level are suspect (see _first; for at
+        most segment.startup_frames frames): that frame may have held parts there, and the reference is
+        the belt's level until shown otherwise. A part in view at the start is then whole from the first
+        frames (against that frame it would be only what it has uncovered since, and where it was, a
+        ghost). A suspect pixel that shows the belt and does not move is belt: its own level joins the
+        reference. A blob of suspect pixels alone that does not move is what lay there from the start (a
+        rail, a stain, a parked part): it joins the reference too, as it would have from the first frame."""
+        cfg = self.config
         suspect = self._suspect
         moving = cv2.dilate(self._moving(frame, self._prev), self._guard)
         settled = cv2.bitwise_and(suspect, cv2.bitwise_not(cv2.bitwise_or(fg, moving)))
@@ -95,6 +111,13 @@ class Segmenter:
             cv2.copyTo(frame.astype(np.float32), settled, self.reference)
             self.background = cv2.convertScaleAbs(self.reference)
             suspect = cv2.bitwise_and(suspect, cv2.bitwise_not(settled))
+        if self._count >= cfg.startup_frames:
+            # Start-up is over: what is still suspect (a rail a part runs along, a corner of another
+            # level) is taken as this frame shows it, as the first frame's would have been.
+            cv2.copyTo(frame.astype(np.float32), suspect, self.reference)
+            self.background = cv2.convertScaleAbs(self.reference)
+            fg = cv2.bitwise_and(fg, cv2.bitwise_not(suspect))
+            suspect = np.zeros_like(suspect)
         self._suspect = suspect if cv2.countNonZero(suspect) else None
         return fg
 
@@ -159,7 +182,7 @@ class Segmenter:
         return parked, ghosts
 
 
-def _median_level(image: np.ndarray) -> float:
-    """The median grey level of an 8-bit image (from its histogram: ~20x cheaper than sorting)."""
-    cumulative = np.cumsum(cv2.calcHist([image], [0], None, [256], [0, 256]).ravel())
+def _median_level(image: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """The median grey level of an 8-bit image under ``mask`` (from its histogram: ~20x cheaper than sorting)."""
+    cumulative = np.cumsum(cv2.calcHist([image], [0], mask, [256], [0, 256]).ravel())
     return float(np.searchsorted(cumulative, cumulative[-1] / 2))
