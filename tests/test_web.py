@@ -118,12 +118,20 @@ def test_in_a_real_browser_the_page_fills_its_tables(live, browser):
 
 
 def test_in_a_real_browser_the_screenshot_shows_the_image_with_overlays(live, browser, tmp_path):
-    shot = tmp_path / "page.png"
-    _chromium(live, f"--screenshot={shot}")
-    image = cv2.imread(str(shot), cv2.IMREAD_COLOR)
-    assert image is not None
-    b, g, r = (image[..., i].astype(int) for i in range(3))
-    assert ((g > 150) & (g - r > 80) & (g - b > 80)).sum() > 30, "no part outline on the page"
+    # The page fetches its image after its script runs: on a loaded machine the first screenshot may
+    # come before it has arrived (the virtual time budget is the page's, not the network's), so up to
+    # three real captures are taken; a page that never shows the outline fails all three.
+    outline = 0
+    for attempt in range(3):
+        shot = tmp_path / f"page{attempt}.png"
+        _chromium(live, f"--screenshot={shot}")
+        image = cv2.imread(str(shot), cv2.IMREAD_COLOR)
+        assert image is not None
+        b, g, r = (image[..., i].astype(int) for i in range(3))
+        outline = int(((g > 150) & (g - r > 80) & (g - b > 80)).sum())
+        if outline > 30:
+            break
+    assert outline > 30, "no part outline on the page"
 
 
 def test_a_bad_web_address_is_one_line(capsys):

@@ -66,6 +66,9 @@ class BoxFit:
     shape_vec: np.ndarray | None = None
     # How many windows the sums were fitted to.
     windows: int = 0
+    # With a size lent (size_prior): the (length, width) this view alone tells, the prior's pull taken
+    # back out (mm); a track adding the fitted size would count what it lent twice.
+    own_size_mm: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -163,15 +166,25 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     info = (None, None)
     if free_height and len(jac) > len(free):
         info = view_information(jac, r, params, rms)
+    own = None if size_prior is None or size_cov is None else _own_size(jac, r, params, free)
     x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0
         size_cov = None if size_cov is None else size_cov[::-1, ::-1]
+        own = None if own is None else own[::-1]
         if info[0] is not None:
             order = [1, 0, 2]
             info = (info[0][np.ix_(order, order)], info[1][order])
     rect = Rect(float(x), float(y), wrap_angle_deg(float(angle)), float(length), float(width))
-    return BoxFit(rect, float(params[_H]), rms, size_cov, *info, len(windows))
+    return BoxFit(rect, float(params[_H]), rms, size_cov, *info, len(windows),
+                  None if own is None else (float(own[0]), float(own[1])))
+
+
+def _own_size(jac: np.ndarray, r: np.ndarray, params: np.ndarray, free: list[int]) -> np.ndarray:
+    """(length, width) as the windows alone tell them: a Gauss-Newton step on the sums alone from the
+    fit's result (which the prior held short of their own minimum)."""
+    step = -np.linalg.pinv(jac.T @ jac) @ (jac.T @ r)
+    return params[[3, 4]] + step[[free.index(3), free.index(4)]]
 
 
 def view_information(jac: np.ndarray, r: np.ndarray, params: np.ndarray, rms: float) -> tuple[np.ndarray, np.ndarray]:

@@ -55,6 +55,9 @@ class Measurement:
     # A box's fit: how well this view alone decides the size (covariance of length and width, mm^2,
     # see BoxFit); None where the size is as sure as any.
     size_cov_mm2: np.ndarray | None = field(default=None, compare=False)
+    # A box fitted with its track's size lent: the (length, width) this view alone tells (see
+    # BoxFit.own_size_mm; None: the rectangle's).
+    own_size_mm: tuple[float, float] | None = None
     # --part-height auto (tracker/height.py). While its track votes on its height: the view fitted at
     # each height. While it refines it: what this view alone tells of (length, width, height) (see
     # boxfit.view_information).
@@ -192,6 +195,7 @@ class Measurer:
         return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px),
                            pickable=others is None, piece=piece, view_mm=(view.x_mm, view.y_mm),
                            size_cov_mm2=None if box is None else box.size_cov_mm2, flat_rect=flat_rect, trials=trials,
+                           own_size_mm=None if box is None else box.own_size_mm,
                            shape_info=None if box is None else box.shape_info,
                            shape_vec=None if box is None else box.shape_vec)
 

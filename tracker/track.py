@@ -117,10 +117,13 @@ class Track:
         d_long = wrap_angle_deg(r.angle_deg - predicted)
         d_short = wrap_angle_deg(r.angle_deg + 90.0 - predicted)
         swapped = abs(d_long) > abs(d_short)
+        # The size this view tells on its own: a box fitted with the track's size lent is pulled towards
+        # it, and that pull is the track's own knowledge, not news.
+        length, width = m.own_size_mm if m.own_size_mm is not None and r is m.rect else (r.length_mm, r.width_mm)
         if not swapped:
-            z = np.array([r.x_mm, r.y_mm, predicted + d_long, r.length_mm, r.width_mm])
+            z = np.array([r.x_mm, r.y_mm, predicted + d_long, length, width])
         else:
-            z = np.array([r.x_mm, r.y_mm, predicted + d_short, r.width_mm, r.length_mm])
+            z = np.array([r.x_mm, r.y_mm, predicted + d_short, width, length])
         r_cov = self.kf.R if m.size_cov_mm2 is None else self._noise_of(m, swapped, cfg)
         shape = None if self.height is None else self.height.shape()
         if shape is not None:
