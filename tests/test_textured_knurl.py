@@ -15,8 +15,10 @@ from textured_support import mpeg4_round_trip
 
 from tracker.config import MeasureConfig, SegmentConfig, TrackerConfig
 from tracker.evaluate import evaluate
+from tracker.measure import HALF_WINDOW_PX, Measurer, _Crossings
 from tracker.pipeline import Pipeline
 from tracker.synthetic import CameraSpec, PartSpec, SceneSpec
+from tracker.undistort import BeltMapper
 
 SPEED = 240.0  # mm/s, the belt's and so the parts'
 
@@ -110,3 +112,25 @@ def test_boxes_on_the_knurled_belt_with_their_height_given():
     s = evaluate(poses, truths, skip_first=3).summary()
     assert s["false_objects"] == 0 and s["missed_frames"] <= 3, s
     assert s["centroid_mean_mm"] <= 0.2 and s["angle_mean_deg"] <= 0.1, s
+
+
+def _crossings(unreadable_left: int, unreadable_right: int, n: int = 20) -> _Crossings:
+    """n left and n right edge windows of a part 150 grey levels over a belt of 60; the first
+    ``unreadable_*`` of each side have a face pixel at the belt's level (a knurl diamond under it)."""
+    k = HALF_WINDOW_PX
+    image = np.full((2 * n, 2 * k), 150.0)
+    rising = np.arange(2 * n) < n
+    image[:unreadable_left, k + 1] = 65.0  # a left edge's face pixel
+    image[n : n + unreadable_right, k - 2] = 65.0  # a right edge's
+    return _Crossings(np.arange(2 * n) % n, np.zeros(2 * n, dtype=int), rising, image, np.full((2 * n, 2 * k), 60.0))
+
+
+def test_a_box_side_with_too_many_unreadable_windows_is_not_read_from_levels():
+    """Windows whose face pixel the belt comes near are left out where they are scattered; where one
+    side of the blob loses more than measure.max_unreadable_fraction (15 %) of its windows, that side
+    may be missing altogether (an elongated part's short side holds an eighth of all windows at 45
+    deg), and the blob is not read from levels: counted over both sides, 4 of 40 would pass."""
+    measurer = Measurer(BeltMapper(CameraSpec().calibration()), MeasureConfig(part_height_mm=10.0))
+    kept = measurer._readable(_crossings(2, 2), HALF_WINDOW_PX)
+    assert kept is not None and len(kept.rows) == 36
+    assert measurer._readable(_crossings(4, 0), HALF_WINDOW_PX) is None
