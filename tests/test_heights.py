@@ -5,6 +5,8 @@ mean 0.02-0.11 mm, p95 at most 0.33 mm, angle at most 0.03 deg for 5-60 mm tall 
 
 from __future__ import annotations
 
+import json
+
 import cv2
 import numpy as np
 import pytest
@@ -28,7 +30,8 @@ def _box_scene(height_mm: float, tilt_deg: float) -> SceneSpec:
 
 
 def _summary(scene: SceneSpec, height_mm: float) -> dict:
-    poses, truths = run_pipeline(scene, TrackerConfig(measure=MeasureConfig(part_height_mm=height_mm)))
+    poses, truths = run_pipeline(
+        scene, TrackerConfig(measure=MeasureConfig(part_height_mm=height_mm, estimate_height=False)))
     return evaluate(poses, truths, skip_first=2).summary(), poses
 
 
@@ -151,21 +154,28 @@ def test_a_cylinder_lying_down_is_no_box_but_its_pose_stays_sane():
     assert len(ids) == 1, ids
 
 
-def test_the_option_replaces_the_settings_height_and_settings_cannot_ask_for_both(scene_dir, tmp_path, capsys):
-    """--part-height (auto or mm) replaces whatever height the settings hold; settings that give a
-    height and ask for it to be estimated are refused with one line."""
+def test_heights_are_estimated_unless_given_and_the_option_replaces_the_settings(scene_dir, tmp_path, capsys):
+    """Auto is the default (contract section 3); a height given is not estimated, in the settings or
+    with --part-height, which replaces whatever height the settings hold; 0 with no estimate: flat."""
+    assert MeasureConfig().estimate_height
+    assert not MeasureConfig(part_height_mm=20.0).estimate_height
+    assert not MeasureConfig(part_height_mm=20.0, estimate_height=True).estimate_height
+    assert not MeasureConfig(estimate_height=False).estimate_height
     settings = tmp_path / "settings.json"
     settings.write_text('{"measure": {"part_height_mm": 20}}')
+    poses = tmp_path / "poses.jsonl"
     base = ["run", "--source", str(scene_dir / "frames" / "%05d.png"), "--calibration",
-            str(scene_dir / "calibration.yaml"), "--no-plc", "--quiet", "--max-frames", "2", "--config", str(settings)]
-    assert main([*base, "--part-height", "auto"]) == 0
-    assert main([*base, "--part-height", "0"]) == 0
-    settings.write_text('{"measure": {"part_height_mm": 20, "estimate_height": true}}')
-    capsys.readouterr()
-    assert main(base) == 2
-    err = capsys.readouterr().err
-    assert "given (part_height_mm) or estimated (estimate_height), got both" in err
-    assert len(err.strip().splitlines()) == 1
+            str(scene_dir / "calibration.yaml"), "--no-plc", "--quiet", "--max-frames", "20", "--config", str(settings),
+            "--poses", str(poses)]
+    heights = {}
+    for option in ("auto", "0", "12", None):
+        poses.unlink(missing_ok=True)
+        assert main(base + (["--part-height", option] if option else [])) == 0
+        lines = [json.loads(line) for line in poses.read_text().splitlines()]
+        heights[option] = {o["height_mm"] for p in lines for o in p["objects"]}
+    # The scene's part is flat: auto finds it flat or has not yet decided (0 leads, or 5 mm).
+    assert heights["0"] == {0.0} and heights["12"] == {12.0} and heights[None] == {20.0}, heights
+    assert 20.0 not in heights["auto"] and 12.0 not in heights["auto"], heights
 
 
 def test_a_box_fitted_with_a_lent_size_tells_its_own_too():

@@ -51,8 +51,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="play a file or recording at its recorded rate, like a camera (the demo does)")
     p.add_argument("--part-height", type=part_height, default=None, metavar="MM|auto",
                    help="every part is a box this many mm tall (its footprint's pose is fitted to the box's "
-                        "outline); auto: each part's height is estimated as it crosses the view. Without "
-                        "the option: the settings (measure.part_height_mm, measure.estimate_height)")
+                        "outline; 0: flat); auto (the default): each part's height is estimated as it crosses "
+                        "the view. Without the option: the settings (measure.part_height_mm, "
+                        "measure.estimate_height)")
     p.add_argument("--web", metavar="HOST:PORT",
                    help="serve the live view (a read-only web page) there, e.g. 127.0.0.1:8080; "
                         "give 0.0.0.0:PORT only on a closed cell network")

@@ -119,8 +119,9 @@ class MeasureConfig:
     max_unreadable_fraction: float = 0.15
     # Estimate each part's height from how its silhouette changes as it crosses the view (boxes of
     # several heights fitted to views along its path, the height whose sizes agree kept, then refined;
-    # see tracker/height.py). What --part-height auto turns on.
-    estimate_height: bool = False
+    # see tracker/height.py): --part-height auto, the default (contract section 3). A height given
+    # (part_height_mm > 0) is not estimated; false with part_height_mm 0: every part flat.
+    estimate_height: bool = True
     # Heights (mm) a part's vote tries.
     height_starts_mm: tuple = (0.0, 5.0, 10.0, 20.0, 40.0, 60.0)
     # At most this many parts vote in one frame (a vote is a box fit per height); the others wait for
@@ -152,9 +153,8 @@ class MeasureConfig:
                   "height_votes_per_frame")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
-        if self.estimate_height and self.part_height_mm > 0:
-            raise BadInput(f"measure: expected a part height given (part_height_mm) or estimated (estimate_height), "
-                           f"got both (part_height_mm {self.part_height_mm:g})")
+        if self.part_height_mm > 0:
+            object.__setattr__(self, "estimate_height", False)  # a height given is not estimated
         if not 0 <= self.max_unreadable_fraction < 1:
             raise BadInput(f"measure.max_unreadable_fraction: expected 0 <= f < 1, got {self.max_unreadable_fraction}")
         if not 0 <= self.edge_blur_px <= 5:
