@@ -106,7 +106,8 @@ def measure_all(quick: bool = False) -> list[dict]:
         row = {"scene": name}
         if height is not None:
             given_ms, flat_ms = {}, {}
-            given = evaluate(*run(scene, MeasureConfig(part_height_mm=height), given_ms), skip_first=2).summary()
+            given = evaluate(*run(scene, MeasureConfig(part_height_mm=height, estimate_height=False), given_ms),
+                             skip_first=2).summary()
             flat = evaluate(*run(scene, MeasureConfig(estimate_height=False), flat_ms), skip_first=2).summary()
             row |= {"given": given, "flat_centroid_mean_mm": flat["centroid_mean_mm"],
                     "measure_ms": given_ms["ms"], "flat_measure_ms": flat_ms["ms"]}

@@ -21,11 +21,13 @@ def rendered(scene: SceneSpec) -> tuple[Renderer, tuple]:
     return renderer, tuple(renderer.render(i) for i in range(scene.n_frames))
 
 
-def run_pipeline(scene: SceneSpec, config=None) -> tuple[list[dict], list[dict]]:
-    """(pose-stream dicts, truth dicts) of the pipeline over a rendered scene."""
+def run_pipeline(scene: SceneSpec, config=None, images: list | None = None) -> tuple[list[dict], list[dict]]:
+    """(pose-stream dicts, truth dicts) of the pipeline over a rendered scene; ``images``: its frames
+    altered (clutter painted on them), one per frame, instead of the rendered ones."""
     renderer, frames = rendered(scene)
     pipeline = Pipeline(renderer.calibration, config)
-    poses = [pipeline.process(i, image, scene.t_ns(i)).to_dict() for i, (image, _) in enumerate(frames)]
+    images = [image for image, _ in frames] if images is None else images
+    poses = [pipeline.process(i, image, scene.t_ns(i)).to_dict() for i, image in enumerate(images)]
     return poses, [truth for _, truth in frames]
 
 

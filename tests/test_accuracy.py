@@ -9,7 +9,6 @@ from test_heights import _box_scene
 
 from tracker.config import MeasureConfig, SegmentConfig, TrackerConfig
 from tracker.evaluate import evaluate
-from tracker.pipeline import Pipeline
 from tracker.scenes import empty, nadir, tilted
 from tracker.synthetic import CameraSpec, PartSpec, SceneSpec
 
@@ -187,16 +186,14 @@ def test_what_lies_still_in_view_from_the_start_is_belt():
     frame on (suspect, then shown to lie still), while a part crossing from outside is measured as ever."""
     part = PartSpec(80, 50, 0, -520, 0, 20, 400, 0)
     scene = SceneSpec(CameraSpec(), (part,), n_frames=60)
-    renderer, frames = rendered(scene)
+    _, frames = rendered(scene)
     images = []
     for image, _ in frames:
         image = image.copy()
         image[20:40, :] = 200  # the rail, across the top of the view
         image[300:330, 500:560] = 10  # the stain
         images.append(image)
-    pipeline = Pipeline(renderer.calibration)
-    poses = [pipeline.process(i, image, scene.t_ns(i)).to_dict() for i, image in enumerate(images)]
-    truths = [truth for _, truth in frames]
+    poses, truths = run_pipeline(scene, images=images)
     s = evaluate(poses, truths, skip_first=SKIP_FIRST).summary()
     assert s["false_objects"] == 0 and s["missed_frames"] == 0, s
     assert all(len(p["objects"]) <= 1 for p in poses), [p["objects"] for p in poses if len(p["objects"]) > 1]
@@ -206,14 +203,7 @@ def test_what_lies_still_in_view_from_the_start_is_belt():
 def _start_scene():
     """A part in view at the start (its first frame the reference), 640x480 straight down."""
     scene = SceneSpec(CameraSpec(), (PartSpec(80, 50, 0, -150, 0, 0, 300, 0),), n_frames=90)
-    renderer, frames = rendered(scene)
-    return scene, renderer, frames
-
-
-def _run_images(scene, renderer, frames, images, config=None) -> tuple[list[dict], list[dict]]:
-    pipeline = Pipeline(renderer.calibration, config)
-    poses = [pipeline.process(i, image, scene.t_ns(i)).to_dict() for i, image in enumerate(images)]
-    return poses, [truth for _, truth in frames]
+    return scene, rendered(scene)[1]
 
 
 def test_a_belt_between_dark_surroundings_starts_with_its_region_of_interest():
@@ -222,7 +212,7 @@ def test_a_belt_between_dark_surroundings_starts_with_its_region_of_interest():
     view at the start is measured from its first frames (without the start-up: 15 missed frames and 48
     false objects); without a region, more than segment.startup_max_fraction of the view is unlike
     the median, so the first frame is taken as it is (as before), never the whole belt as a part."""
-    scene, renderer, frames = _start_scene()
+    scene, frames = _start_scene()
     band = []
     for image, _ in frames:
         image = image.copy()
@@ -230,9 +220,9 @@ def test_a_belt_between_dark_surroundings_starts_with_its_region_of_interest():
         image[330:] = 0
         band.append(image)
     roi = TrackerConfig(segment=SegmentConfig(roi_px=((0, 155), (639, 155), (639, 325), (0, 325))))
-    s = evaluate(*_run_images(scene, renderer, frames, band, roi), skip_first=SKIP_FIRST).summary()
+    s = evaluate(*run_pipeline(scene, roi, images=band), skip_first=SKIP_FIRST).summary()
     assert s["false_objects"] == 0 and s["missed_frames"] <= 1, s
-    poses, truths = _run_images(scene, renderer, frames, band)
+    poses, truths = run_pipeline(scene, images=band)
     late = evaluate(poses[40:], truths[40:]).summary()
     assert late["missed_frames"] == 0, late
 
@@ -241,7 +231,7 @@ def test_a_rail_the_part_runs_along_from_the_start_settles_after_start_up():
     """A bright rail flush with the side of a part in view at the start: rail and part are one blob, so
     the rail stays suspect while the part runs along it, until segment.startup_frames (30) have passed;
     then it is taken as the frame shows it, and the part is measured alone."""
-    scene, renderer, frames = _start_scene()
+    scene, frames = _start_scene()
     image0 = frames[0][0]
     rows = np.nonzero((image0 > np.median(image0) + 30).any(axis=1))[0]
     railed = []
@@ -249,7 +239,7 @@ def test_a_rail_the_part_runs_along_from_the_start_settles_after_start_up():
         image = image.copy()
         image[rows.max() + 1 : rows.max() + 12, :] = 200
         railed.append(image)
-    poses, truths = _run_images(scene, renderer, frames, railed)
+    poses, truths = run_pipeline(scene, images=railed)
     late = evaluate(poses[35:], truths[35:]).summary()
     assert late["missed_frames"] == 0 and late["false_objects"] == 0, late
     assert late["centroid_mean_mm"] <= 0.05, late

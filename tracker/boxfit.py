@@ -160,13 +160,15 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     params, r, jac, keep = _robust(middling, params, free, _SUM_ITERATIONS, prior, converged_steps)
     params, r, jac = _least_squares(lambda p: sums(p, keep), params, free, _SUM_ITERATIONS, prior, converged_steps)
     rms = float(np.sqrt(np.mean(r**2))) if len(r) else math.inf
-    size_cov = _size_covariance(jac, free, rms) if len(r) > len(free) else None
+    # The sums' own normal matrix, inverted once: the size's covariance and, with a size lent, its own estimate.
+    normal_inv = np.linalg.pinv(jac.T @ jac) if len(r) > len(free) else None
+    size_cov = None if normal_inv is None else _size_covariance(normal_inv, free, rms)
     if not np.isfinite(params).all() or rms > max_rms_px or min(params[3], params[4]) <= 0:
         return None
     info = (None, None)
     if free_height and len(jac) > len(free):
         info = view_information(jac, r, params, rms)
-    own = None if size_prior is None or size_cov is None else _own_size(jac, r, params, free)
+    own = None if size_prior is None or normal_inv is None else _own_size(normal_inv, jac, r, params, free)
     x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0
@@ -180,10 +182,12 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
                   None if own is None else (float(own[0]), float(own[1])))
 
 
-def _own_size(jac: np.ndarray, r: np.ndarray, params: np.ndarray, free: list[int]) -> np.ndarray:
-    """(length, width) as the windows alone tell them: a Gauss-Newton step on the sums alone from the
-    fit's result (which the prior held short of their own minimum)."""
-    step = -np.linalg.pinv(jac.T @ jac) @ (jac.T @ r)
+def _own_size(normal_inv: np.ndarray, jac: np.ndarray, r: np.ndarray, params: np.ndarray,
+              free: list[int]) -> np.ndarray:
+    """(length, width) as the windows alone tell them: a Gauss-Newton step on the sums alone (their
+    normal matrix's pseudo-inverse ``normal_inv``) from the fit's result, which the prior held short of
+    their own minimum."""
+    step = -normal_inv @ (jac.T @ r)
     return params[[3, 4]] + step[[free.index(3), free.index(4)]]
 
 
@@ -206,11 +210,11 @@ def view_information(jac: np.ndarray, r: np.ndarray, params: np.ndarray, rms: fl
     return info / variance, (info @ params[shape] - reduced_grad) / variance
 
 
-def _size_covariance(jac: np.ndarray, free: list[int], rms: float) -> np.ndarray:
-    """The covariance of (length, width) from the windows alone (the prior left out, the shades
-    projected out), scaled by the residuals' spread."""
+def _size_covariance(normal_inv: np.ndarray, free: list[int], rms: float) -> np.ndarray:
+    """The covariance of (length, width) from the windows alone (``normal_inv``: the pseudo-inverse of
+    their normal matrix; the prior left out, the shades projected out), scaled by the residuals' spread."""
     size = [free.index(i) for i in (3, 4)]
-    return (np.linalg.pinv(jac.T @ jac) * rms**2)[np.ix_(size, size)]
+    return (normal_inv * rms**2)[np.ix_(size, size)]
 
 
 def inliers(residuals: np.ndarray) -> np.ndarray:

@@ -155,22 +155,20 @@ class Measurer:
         if cfg.subpixel and not clipped:
             crossed = self._crossings(frame, reference, contour, (x, y, w, h), others)
         # Binary staircase unless its edges read: boundary pixel centres sit half a pixel inside the edge.
-        points_px = contour.reshape(-1, 2).astype(np.float64)
-        rect = view = min_area_rect(hull_mm)
+        staircase = contour.reshape(-1, 2).astype(np.float64), min_area_rect(hull_mm)
         if not self._boxes:
-            flat = None if crossed is None else self._flat_points(crossed)
-            if flat is not None:
-                points_px, rect = flat, self._rect_of(self.mapper.to_mm(flat))
-                view = rect
+            points_px, rect = self._flat_reading(crossed, staircase)
+            view = rect
         else:
+            points_px, rect = staircase
+            view = rect
             edges = None if crossed is None else self._box_edges(crossed)
             flat = None
             if cfg.estimate_height and crossed is not None:
-                # The blob measured as a flat part always is (a box's edges are read against the face
-                # next to each, which on a flat part is a blurred mix), or with too little contrast for
-                # that, as its outline's rectangle: the pose of a part its track finds flat.
-                flat = self._flat_points(crossed)
-                flat_rect = min_area_rect(hull_mm) if flat is None else self._rect_of(self.mapper.to_mm(flat))
+                # The pose of a part its track finds flat (a box's edges are read against the face next
+                # to each, which on a flat part is a blurred mix).
+                flat = self._flat_reading(crossed, staircase)
+                flat_rect = flat[1]
             if edges is not None:
                 points_px = edges.points_px
                 # Undistorted once: the rectangle on the belt and a box's fit both start from them.
@@ -180,9 +178,11 @@ class Measurer:
                 rect = view = flat_rect  # no box reads from these edges: measured as flat parts are
             known = self._known_part(rect)
             if known is not None and known.flat:
-                # Found flat (--part-height auto): measured as flat mode measures it.
-                rect = view = flat_rect or min_area_rect(hull_mm)
-                points_px = contour.reshape(-1, 2).astype(np.float64) if flat is None else flat
+                # Found flat (--part-height auto): measured as flat mode measures it (with no windows to
+                # read, as the staircase it is already).
+                if flat is not None:
+                    points_px, rect = flat
+                    view = rect
             elif edges is not None:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
                 box, trials = self._fit_box(points_norm, self._windows(edges), rect, known)
@@ -198,6 +198,14 @@ class Measurer:
                            own_size_mm=None if box is None else box.own_size_mm,
                            shape_info=None if box is None else box.shape_info,
                            shape_vec=None if box is None else box.shape_vec)
+
+    def _flat_reading(self, crossed: _Crossed | None,
+                      staircase: tuple[np.ndarray, Rect]) -> tuple[np.ndarray, Rect]:
+        """The blob measured as a flat part always is: its edge points (Nx2 px) and rectangle, read against
+        the part's own level; without windows to read, or too little contrast in them, ``staircase``
+        (its boundary pixels and its outline's rectangle)."""
+        flat = None if crossed is None else self._flat_points(crossed)
+        return staircase if flat is None else (flat, self._rect_of(self.mapper.to_mm(flat)))
 
     def _flat_points(self, crossed: _Crossed) -> np.ndarray | None:
         """Sub-pixel edge points (Nx2 px) read against the part's own level (a flat part's, uniform);

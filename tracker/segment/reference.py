@@ -107,19 +107,21 @@ class Segmenter:
             lying = (~keep[labels]).astype(np.uint8) * 255
             settled = cv2.bitwise_or(settled, lying)
             fg = cv2.bitwise_and(fg, cv2.bitwise_not(lying))
-        if cv2.countNonZero(settled):
-            cv2.copyTo(frame.astype(np.float32), settled, self.reference)
-            self.background = cv2.convertScaleAbs(self.reference)
-            suspect = cv2.bitwise_and(suspect, cv2.bitwise_not(settled))
         if self._count >= cfg.startup_frames:
             # Start-up is over: what is still suspect (a rail a part runs along, a corner of another
             # level) is taken as this frame shows it, as the first frame's would have been.
-            cv2.copyTo(frame.astype(np.float32), suspect, self.reference)
-            self.background = cv2.convertScaleAbs(self.reference)
             fg = cv2.bitwise_and(fg, cv2.bitwise_not(suspect))
-            suspect = np.zeros_like(suspect)
+            settled = suspect
+        if cv2.countNonZero(settled):
+            self._take(frame, settled)
+            suspect = cv2.bitwise_and(suspect, cv2.bitwise_not(settled))
         self._suspect = suspect if cv2.countNonZero(suspect) else None
         return fg
+
+    def _take(self, frame: np.ndarray, where: np.ndarray) -> None:
+        """The reference becomes the frame where ``where`` (uint8 mask) is set."""
+        cv2.copyTo(frame.astype(np.float32), where, self.reference)
+        self.background = cv2.convertScaleAbs(self.reference)
 
     def _moving(self, frame: np.ndarray, prev: np.ndarray) -> np.ndarray:
         _, moving = cv2.threshold(cv2.absdiff(frame, prev), self.config.motion_threshold, 255, cv2.THRESH_BINARY)
@@ -149,8 +151,7 @@ class Segmenter:
         limit = -(-cfg.absorb_after_frames // cfg.background_every)  # learning steps, rounded up
         absorb = cv2.bitwise_or(cv2.compare(still, limit, cv2.CMP_GE), ghosts)
         if cv2.countNonZero(absorb):
-            cv2.copyTo(frame.astype(np.float32), absorb, self.reference)
-            self.background = cv2.convertScaleAbs(self.reference)
+            self._take(frame, absorb)
             still = cv2.bitwise_and(still, still, mask=cv2.bitwise_not(absorb))
         self._still_steps = still
 
