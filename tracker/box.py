@@ -80,32 +80,32 @@ class BoxCamera:
         """The 8 corners' normalised images: footprint first (counter-clockwise), then the top face."""
         return self._corner_images(np.array([[*params[:5], height_mm]]))[0]
 
-    def _corner_images(self, params: np.ndarray) -> np.ndarray:
-        """The 8 corners' images of each box (P rows of x, y, angle, length, width, height): (P, 8, 2)."""
+    def _corner_images(self, params: np.ndarray, footprints: np.ndarray | None = None) -> np.ndarray:
+        """The 8 corners' images of each box (P rows of x, y, angle, length, width, height): (P, 8, 2);
+        ``footprints``: their footprints' corners (P, 4, 2), if already at hand."""
         world = np.zeros((len(params), 8, 3))
-        world[:, :4, :2] = world[:, 4:, :2] = _footprints(params)
+        world[:, :4, :2] = world[:, 4:, :2] = _footprints(params) if footprints is None else footprints
         world[:, 4:, 2] = -params[:, 5:6]
         cam = world @ self.rotation.T + self.translation
         return cam[..., :2] / cam[..., 2:3]
 
-    def outline(self, params: np.ndarray, height_mm: float) -> np.ndarray:
-        """The silhouette polygon (Kx2, normalised coordinates)."""
-        pts = self.corners(params, height_mm)
-        if height_mm == 0:
-            return pts[:4]
+    def outlines(self, params: np.ndarray) -> list[np.ndarray]:
+        """The silhouette polygon of each box (P rows of x, y, angle, length, width, height)."""
+        pts = self._corner_images(params)
         # The hull's vertices chosen in float32 (all OpenCV takes), their coordinates kept in float64.
-        index = cv2.convexHull(pts.astype(np.float32).reshape(-1, 1, 2), returnPoints=False)
-        return pts[index.reshape(-1)]
+        return [p[:4] if h == 0 else p[cv2.convexHull(p.astype(np.float32), returnPoints=False).reshape(-1)]
+                for p, h in zip(pts, params[:, 5], strict=True)]
 
     def faces(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The faces the camera sees of each box (P rows of x, y, angle, length, width, height): their
         polygons (P, F, 4, 2) in normalised coordinates and kinds (F,). Which faces are seen is decided
         on the first box (the others are its small variations: a Jacobian's)."""
         params = np.atleast_2d(params)
-        pts = self._corner_images(params)
+        footprints = _footprints(params)
+        pts = self._corner_images(params, footprints)
         faces, kinds = [[4, 5, 6, 7]], [TOP]
         if params[0, 5] > 0:
-            foot = _footprints(params[:1])[0]
+            foot = footprints[0]
             for i in range(4):
                 a, b = foot[i], foot[(i + 1) % 4]
                 outward = np.array([b[1] - a[1], a[0] - b[0]])  # the footprint is counter-clockwise
@@ -119,7 +119,7 @@ class BoxCamera:
 
 def _footprints(params: np.ndarray) -> np.ndarray:
     """rectangle_corners of each row's (x, y, angle, length, width): (P, 4, 2), counter-clockwise."""
-    return np.stack([rectangle_corners(*row[:5]) for row in params])
+    return rectangle_corners(*params[:, :5].T)
 
 
 def distances_to_outline(points: np.ndarray, outline: np.ndarray) -> np.ndarray:

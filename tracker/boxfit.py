@@ -90,29 +90,33 @@ def predicted_sums(camera: BoxCamera, windows: EdgeWindows, params: np.ndarray,
     """The coverage sums each box (P rows of ``params``) predicts for ``windows`` (P, N; px) with the
     side ``shades`` (end faces, long faces), or with the shades that explain the sums best (None)."""
     polygons, kinds = camera.faces(params)
-    onehot = np.eye(3)[kinds]  # face -> kind
-    total, level = (lengths @ onehot for lengths in lengths_in_faces(windows, polygons))
-    if shades is None:
-        shades = _best_shades(total, level, windows.covered_px)
-    s = np.concatenate([np.ones((len(total), 1)), np.broadcast_to(shades, (len(total), 2))], axis=1)
-    # The level pixel outside the part (a window across a corner) is an outlier, not a division by 0.
-    return np.einsum("pnk,pk->pn", total, s) / np.maximum(np.einsum("pnk,pk->pn", level, s), _MIN_LEVEL)
+    return _shaded(lengths_in_faces(windows, polygons), kinds, windows.covered_px, shades)[0]
 
 
 def _best_shades(total: np.ndarray, level: np.ndarray, covered: np.ndarray) -> np.ndarray:
     """The side shades that best explain the sums (P, 2), given each kind's pixels in each window
     (P, N, 3) and in its level pixel: covered * (level . s) = total . s is linear in the shades s,
-    and reweighted by the level it implies it is the residual itself."""
-    shades = np.full((len(total), 2), _SHADE_START)
-    prior = _SHADE_PRIOR**2 * np.eye(2)
-    for _ in range(_SHADE_ROUNDS):
-        weight = 1.0 / np.maximum(level[..., 0] + np.einsum("pnk,pk->pn", level[..., 1:], shades), _MIN_LEVEL)
-        a = (covered[None, :, None] * level[..., 1:] - total[..., 1:]) * weight[..., None]
-        b = (total[..., 0] - covered[None] * level[..., 0]) * weight
-        normal = np.einsum("pnk,pnj->pkj", a, a) + prior
-        rhs = np.einsum("pnk,pn->pk", a, b) + prior @ np.full(2, _SHADE_START)
-        shades = np.clip(np.linalg.solve(normal, rhs[..., None])[..., 0], *_SHADE_RANGE)
-    return shades
+    and reweighted by the level it implies it is the residual itself (_SHADE_ROUNDS rounds from
+    _SHADE_START, held by _SHADE_PRIOR, kept within _SHADE_RANGE)."""
+    return _shaded((total, level), np.arange(3), covered, None)[1]
+
+
+def _shaded(lengths: tuple[np.ndarray, np.ndarray], kinds: np.ndarray, covered: np.ndarray,
+            shades: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The sums (P, N) the faces' pixels in each window and its level pixel (``lengths``: each P, N, F;
+    face f of kind ``kinds[f]``) predict with the side ``shades``, or with the best (None); and the
+    shades (P, 2). Compiled (tracker/facecover.py): in numpy's small whole-array steps the shades'
+    solution cost as much as the faces' clipping."""
+    from tracker.facecover import shaded_sums  # noqa: PLC0415 (compiled: see box.lengths_in_faces)
+
+    total, level = lengths
+    sums = np.empty(total.shape[:2])
+    solved = np.empty((len(total), 2))
+    given = np.zeros(2) if shades is None else np.asarray(shades, dtype=np.float64)
+    shaded_sums(total, level, np.ascontiguousarray(kinds, dtype=np.int64),
+                np.ascontiguousarray(covered, dtype=np.float64), given, shades is None, _SHADE_START,
+                _SHADE_PRIOR**2, *_SHADE_RANGE, _SHADE_ROUNDS, _MIN_LEVEL, sums, solved)
+    return sums, solved
 
 
 def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, start: Rect,
@@ -132,8 +136,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
 
     # Each takes boxes (P rows of parameters) and gives their residuals (P, N) over the rows ``which``.
     def outline(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
-        return np.stack([px_per_norm * distances_to_outline(points_norm[which], camera.outline(b[:5], b[_H]))
-                         for b in p])
+        return np.stack([px_per_norm * distances_to_outline(points_norm[which], o) for o in camera.outlines(p)])
 
     def sums(p: np.ndarray, which: np.ndarray | slice = slice(None), shades: np.ndarray | None = None) -> np.ndarray:
         w = windows if isinstance(which, slice) else windows.subset(which)

@@ -160,3 +160,49 @@ def outline_distances(points, outline, out):  # pragma: no cover (compiled)
                 best, side = dist, ex * wy - ey * wx
         # The polygon's orientation decides which side of an edge is outside.
         out[n] = -best if side * area2 > 0 else best
+
+
+@numba.njit(cache=True)
+def shaded_sums(total, level, kinds, covered, shades, solve, start, prior, low, high, rounds, min_level,
+                out_sums, out_shades):  # pragma: no cover (compiled)
+    """Fills ``out_sums`` (P, N) with the coverage sum each box predicts for each window: its faces'
+    pixels (``total``, P x N x F, and the level pixel's shares ``level``; face f of kind ``kinds[f]``,
+    0 the top) each times its kind's shade, over the level pixel's shade (at least ``min_level``).
+    The side shades are ``shades`` (2,), or with ``solve`` those that best explain ``covered`` (N,),
+    found as boxfit._best_shades describes; they go to ``out_shades`` (P, 2)."""
+    n_box, n_win, n_face = total.shape
+    t = np.empty((n_win, 3))
+    lv = np.empty((n_win, 3))
+    for p in range(n_box):
+        t[:] = 0.0
+        lv[:] = 0.0
+        for n in range(n_win):
+            for f in range(n_face):
+                t[n, kinds[f]] += total[p, n, f]
+                lv[n, kinds[f]] += level[p, n, f]
+        s1, s2 = shades[0], shades[1]
+        if solve:
+            s1, s2 = start, start
+            for _ in range(rounds):
+                a11 = a12 = a22 = b1 = b2 = 0.0
+                for n in range(n_win):
+                    w = 1.0 / max(lv[n, 0] + lv[n, 1] * s1 + lv[n, 2] * s2, min_level)
+                    x1 = (covered[n] * lv[n, 1] - t[n, 1]) * w
+                    x2 = (covered[n] * lv[n, 2] - t[n, 2]) * w
+                    y = (t[n, 0] - covered[n] * lv[n, 0]) * w
+                    a11 += x1 * x1
+                    a12 += x1 * x2
+                    a22 += x2 * x2
+                    b1 += x1 * y
+                    b2 += x2 * y
+                a11 += prior
+                a22 += prior
+                b1 += prior * start
+                b2 += prior * start
+                det = a11 * a22 - a12 * a12
+                s1 = min(max((a22 * b1 - a12 * b2) / det, low), high)
+                s2 = min(max((a11 * b2 - a12 * b1) / det, low), high)
+        out_shades[p, 0], out_shades[p, 1] = s1, s2
+        for n in range(n_win):
+            out_sums[p, n] = ((t[n, 0] + t[n, 1] * s1 + t[n, 2] * s2)
+                              / max(lv[n, 0] + lv[n, 1] * s1 + lv[n, 2] * s2, min_level))

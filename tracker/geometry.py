@@ -23,14 +23,15 @@ def wrap_angle_deg(angle: float) -> float:
     return a
 
 
-def rectangle_corners(x: float, y: float, angle_deg: float, length: float, width: float) -> np.ndarray:
-    """The 4 corners (4x2) in counter-clockwise order: positive signed area in (X, Y)."""
-    a = math.radians(angle_deg)
-    ux, uy = math.cos(a) * length / 2, math.sin(a) * length / 2
-    vx, vy = -math.sin(a) * width / 2, math.cos(a) * width / 2
-    return np.array(
-        [[x - ux - vx, y - uy - vy], [x + ux - vx, y + uy - vy], [x + ux + vx, y + uy + vy], [x - ux + vx, y - uy + vy]]
-    )
+def rectangle_corners(x, y, angle_deg, length, width) -> np.ndarray:
+    """The 4 corners (4x2) in counter-clockwise order: positive signed area in (X, Y). Given arrays
+    (P,) of each, the corners of every rectangle at once: (P, 4, 2)."""
+    a = np.radians(angle_deg)
+    ux, uy = np.cos(a) * length / 2, np.sin(a) * length / 2
+    vx, vy = -np.sin(a) * width / 2, np.cos(a) * width / 2
+    corners = np.stack([x - ux - vx, y - uy - vy, x + ux - vx, y + uy - vy,
+                        x + ux + vx, y + uy + vy, x - ux + vx, y - uy + vy], axis=-1)
+    return corners.reshape((*np.shape(corners)[:-1], 4, 2)).astype(np.float64)
 
 
 @dataclass(frozen=True)
