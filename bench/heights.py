@@ -9,7 +9,8 @@ parts of different heights at once, and a flat part. For auto, the height and ce
 frames before and after the track says its height has converged (the part's own track: not the
 ghost a part in view at the start leaves behind). The last columns are the measurement stage's own
 time per frame (one part in view), with the height given, flat and estimated, in the same run, and
-with the height estimated its 99th percentile (the frames a part votes in).
+with the height estimated its 99th percentile (the frames a part votes in). The last column is auto
+with measure.learn_shades (tracker/shades.py).
 """
 
 from __future__ import annotations
@@ -116,6 +117,8 @@ def measure_all(quick: bool = False) -> list[dict]:
         row["auto_measure_ms"], row["auto_measure_p99_ms"] = auto_ms["ms"], auto_ms["p99_ms"]
         row["auto"] = auto_errors(auto_poses, auto_truths) | {
             "centroid_mean_mm": evaluate(auto_poses, auto_truths, skip_first=2).summary()["centroid_mean_mm"]}
+        # The same with measure.learn_shades (off by default: see the README).
+        row["auto_shades"] = auto_errors(*run(scene, MeasureConfig(estimate_height=True, learn_shades=True)))
         rows.append(row)
     return rows
 
@@ -131,8 +134,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     print("| scene | given: centroid mean / p95 (mm) | angle mean (deg) | length / width max (mm) | flat: centroid "
           "mean (mm) | auto: height before / after converged (mm) | auto: centroid before / after (mm) "
-          "| auto: converged | measure ms/frame: given / flat / auto | auto: measure p99 ms |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "| auto: converged | measure ms/frame: given / flat / auto | auto: measure p99 ms "
+          "| auto, shades learnt: height after converged (mm), converged |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         g, a = r.get("given"), r["auto"]
         given = (f"{g['centroid_mean_mm']:.3f} / {g['centroid_p95_mm']:.3f} | {g['angle_mean_deg']:.3f} "
@@ -141,7 +145,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {r['scene']} | {given} | {a['h_before']:.2f} / {a['h_after']:.2f} (max {a['h_after_max']:.2f}) "
               f"| {a['c_before']:.3f} / {a['c_after']:.3f} | {100 * a['converged_fraction']:.0f} % "
               f"| {r.get('measure_ms', math.nan):.1f} / {r.get('flat_measure_ms', math.nan):.1f} "
-              f"/ {r['auto_measure_ms']:.1f} | {r['auto_measure_p99_ms']:.1f} |")
+              f"/ {r['auto_measure_ms']:.1f} | {r['auto_measure_p99_ms']:.1f} "
+              f"| {r['auto_shades']['h_after']:.2f} (max {r['auto_shades']['h_after_max']:.2f}), "
+              f"{100 * r['auto_shades']['converged_fraction']:.0f} % |")
     return 0
 
 

@@ -29,12 +29,13 @@ from tracker.pipeline import Pipeline
 from tracker.synthetic import CameraSpec, PartSpec, SceneSpec
 
 
-def _auto(height_mm: float, tilt_deg: float) -> list[tuple[dict, dict]]:
+def _auto(height_mm: float, tilt_deg: float, **measure) -> list[tuple[dict, dict]]:
     """(pose, truth) of the part's own track in each frame it was measured: the measured object nearest
     the part, within half its width, of the track that is so most often (not the ghost a part in view
-    at the start leaves behind). That track has to hold nearly all of them: one track per part."""
+    at the start leaves behind). That track has to hold nearly all of them: one track per part.
+    ``measure``: settings of the measurement beside estimate_height."""
     scene = _box_scene(height_mm, tilt_deg)
-    poses, truths = run_pipeline(scene, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
+    poses, truths = run_pipeline(scene, TrackerConfig(measure=MeasureConfig(estimate_height=True, **measure)))
     matched = []
     for pose, truth in zip(poses, truths, strict=True):
         t = truth["objects"][0]

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tracker.box import BoxCamera, EdgeWindows, distances_to_outline, lengths_in_faces
+from tracker.box import SIDE_X, SIDE_Y, BoxCamera, EdgeWindows, distances_to_outline, lengths_in_faces
 from tracker.geometry import Rect, wrap_angle_deg
 
 # Parameters: x, y (mm), angle (deg), length, width, height (mm).
@@ -38,10 +38,17 @@ PRECISE_STEPS = 0.05
 # The side shades' prior, and how weakly it holds them (px of residual per unit of shade): a side
 # face too narrow to show its shade leaves the shade undecided.
 _SHADE_START, _SHADE_PRIOR = 0.5, 0.02
+_DEFAULT_START, _DEFAULT_HOLD = np.full(2, _SHADE_START), np.full(2, _SHADE_PRIOR**2)
 # The shades a side may have: from nearly the belt's level (a window read against a side face as
 # dark as the belt has no contrast to read; the measurement refuses those) to half again the top's
 # contrast. A fit that would need others is wandering in a flat valley.
 _SHADE_RANGE = (0.1, 1.5)
+# A view tells a side's shade below this only: a step that leaves the shades a side may have tells
+# none, nor does one as bright as the top (such a side looks like more of the top, and lent, it lets
+# a box of another height pass for the part: a flat part's 5-10 mm boxes learnt 1.0-1.2).
+_SHADE_TOLD_MAX = 1.0
+# The step a shade's derivative is taken over (a fraction of the top's contrast).
+_SHADE_STEP = 0.01
 # Reweighting rounds of the shades' solution (their sums are ratios, linear once the level is fixed).
 _SHADE_ROUNDS = 3
 # The least level (a fraction of the top's) a window's level pixel is taken to have.
@@ -69,6 +76,8 @@ class BoxFit:
     # With a size lent (size_prior): the (length, width) this view alone tells, the prior's pull taken
     # back out (mm); a track adding the fitted size would count what it lent twice.
     own_size_mm: tuple[float, float] | None = None
+    # A box with side faces: what this view alone tells of their shades (see ViewShades).
+    view_shades: ViewShades | None = None
 
 
 @dataclass(frozen=True)
@@ -85,12 +94,38 @@ class SizePrior:
             raise ValueError(f"size prior: expected length >= width > 0 and sigmas > 0, got {self}")
 
 
-def predicted_sums(camera: BoxCamera, windows: EdgeWindows, params: np.ndarray,
-                   shades: np.ndarray | None = None) -> np.ndarray:
+@dataclass(frozen=True)
+class ShadePrior:
+    """A part's side shades (end faces, long faces; each a side's contrast as a fraction of the top's)
+    as known from other views (a track's), 1-sigma each (inf: not known, held as a fit alone holds it)."""
+
+    shades: tuple[float, float]
+    sigma: tuple[float, float]
+
+    def __post_init__(self) -> None:
+        if not (np.all(np.isfinite(self.shades)) and min(self.sigma) > 0):
+            raise ValueError(f"shade prior: expected finite shades and sigmas > 0 (inf: not known), got {self}")
+
+
+@dataclass(frozen=True)
+class ViewShades:
+    """The side shades (end faces, long faces) one view of a box tells on its own, any prior taken back
+    out, and their variances (inf: the view shows no such face, or cannot tell its shade); fitted with
+    a box ``height_mm`` tall. A thin part's side face is a sliver whose shade trades with its edge:
+    one view decides it poorly, and the same part's views decide it together (tracker/shades.py)."""
+
+    height_mm: float
+    shades: tuple[float, float]
+    variances: tuple[float, float]
+
+
+def predicted_sums(camera: BoxCamera, windows: EdgeWindows, params: np.ndarray, shades: np.ndarray | None = None,
+                   shade_start: np.ndarray = _DEFAULT_START, shade_hold: np.ndarray = _DEFAULT_HOLD) -> np.ndarray:
     """The coverage sums each box (P rows of ``params``) predicts for ``windows`` (P, N; px) with the
-    side ``shades`` (end faces, long faces), or with the shades that explain the sums best (None)."""
+    side ``shades`` (end faces, long faces), or with the shades that explain the sums best (None; from
+    ``shade_start``, held there by ``shade_hold``, each (2,): see _best_shades)."""
     polygons, kinds = camera.faces(params)
-    return _shaded(lengths_in_faces(windows, polygons), kinds, windows.covered_px, shades)[0]
+    return _shaded(lengths_in_faces(windows, polygons), kinds, windows.covered_px, shades, shade_start, shade_hold)[0]
 
 
 def _best_shades(total: np.ndarray, level: np.ndarray, covered: np.ndarray) -> np.ndarray:
@@ -101,12 +136,13 @@ def _best_shades(total: np.ndarray, level: np.ndarray, covered: np.ndarray) -> n
     return _shaded((total, level), np.arange(3), covered, None)[1]
 
 
-def _shaded(lengths: tuple[np.ndarray, np.ndarray], kinds: np.ndarray, covered: np.ndarray,
-            shades: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+def _shaded(lengths: tuple[np.ndarray, np.ndarray], kinds: np.ndarray, covered: np.ndarray, shades: np.ndarray | None,
+            start: np.ndarray = _DEFAULT_START, hold: np.ndarray = _DEFAULT_HOLD) -> tuple[np.ndarray, np.ndarray]:
     """The sums (P, N) the faces' pixels in each window and its level pixel (``lengths``: each P, N, F;
-    face f of kind ``kinds[f]``) predict with the side ``shades``, or with the best (None); and the
-    shades (P, 2). Compiled (tracker/facecover.py): in numpy's small whole-array steps the shades'
-    solution cost as much as the faces' clipping."""
+    face f of kind ``kinds[f]``) predict with the side ``shades``, or with the best (None: from
+    ``start``, held there by ``hold``, px^2 per unit shade^2); and the shades (P, 2). Compiled
+    (tracker/facecover.py): in numpy's small whole-array steps the shades' solution cost as much as
+    the faces' clipping."""
     from tracker.facecover import shaded_sums  # noqa: PLC0415 (compiled: see box.lengths_in_faces)
 
     total, level = lengths
@@ -114,25 +150,35 @@ def _shaded(lengths: tuple[np.ndarray, np.ndarray], kinds: np.ndarray, covered: 
     solved = np.empty((len(total), 2))
     given = np.zeros(2) if shades is None else np.asarray(shades, dtype=np.float64)
     shaded_sums(total, level, np.ascontiguousarray(kinds, dtype=np.int64),
-                np.ascontiguousarray(covered, dtype=np.float64), given, shades is None, _SHADE_START,
-                _SHADE_PRIOR**2, *_SHADE_RANGE, _SHADE_ROUNDS, _MIN_LEVEL, sums, solved)
+                np.ascontiguousarray(covered, dtype=np.float64), given, shades is None,
+                np.asarray(start, dtype=np.float64), np.asarray(hold, dtype=np.float64), *_SHADE_RANGE, _SHADE_ROUNDS,
+                _MIN_LEVEL, sums, solved)
     return sums, solved
 
 
 def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, start: Rect,
             height_mm: float, max_rms_px: float, px_per_norm: float, free_height: bool = False,
             size_prior: SizePrior | None = None, sum_sigma_px: float = 0.1,
-            height_prior: tuple[float, float] | None = None, converged_steps: float = CONVERGED_STEPS) -> BoxFit | None:
+            height_prior: tuple[float, float] | None = None, converged_steps: float = CONVERGED_STEPS,
+            shade_prior: ShadePrior | None = None, tell_shades: bool = False) -> BoxFit | None:
     """The footprint (and with ``free_height`` the height, from ``height_mm`` on) whose box best
     explains ``windows``, or None when the fit's RMS residual exceeds ``max_rms_px``. ``points_norm``:
     the edge points (Nx2, normalised) that bring the box near first; ``px_per_norm``: the focal
     length. ``size_prior``: the size known from other views, weighed against the sums as if each had
     noise ``sum_sigma_px``; ``height_prior``: (mm, 1-sigma mm) the height known from other views,
     likewise (with ``free_height``); ``converged_steps``: how near the minimum the edge sums' fit stops
-    (in difference steps: see PRECISE_STEPS). The height reported is the fitted box's; with
-    ``free_height`` the view's own information on its shape (the priors taken back out) comes with it."""
+    (in difference steps: see PRECISE_STEPS); ``shade_prior``: the side shades known from other views,
+    weighed likewise (without: held weakly to middling shades). The height reported is the fitted
+    box's; with ``free_height`` the view's own information on its shape (the priors taken back out)
+    comes with it, and with ``tell_shades`` what the view tells of its side faces' shades (ViewShades:
+    a Jacobian more)."""
     free = [0, 1, 2, 3, 4, *([_H] if free_height else [])]
     params = box_params(start, height_mm)
+    shade_start, shade_hold = _DEFAULT_START, _DEFAULT_HOLD
+    if shade_prior is not None:
+        known = np.isfinite(shade_prior.sigma)
+        shade_start = np.where(known, shade_prior.shades, _SHADE_START)
+        shade_hold = np.where(known, (sum_sigma_px / np.array(shade_prior.sigma)) ** 2, _DEFAULT_HOLD)
 
     # Each takes boxes (P rows of parameters) and gives their residuals (P, N) over the rows ``which``.
     def outline(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
@@ -140,10 +186,10 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
 
     def sums(p: np.ndarray, which: np.ndarray | slice = slice(None), shades: np.ndarray | None = None) -> np.ndarray:
         w = windows if isinstance(which, slice) else windows.subset(which)
-        return w.covered_px - predicted_sums(camera, w, p, shades)
+        return w.covered_px - predicted_sums(camera, w, p, shades, shade_start, shade_hold)
 
     def middling(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
-        return sums(p, which, np.full(2, _SHADE_START))
+        return sums(p, which, shade_start)
 
     params, r, jac, _ = _robust(outline, params, free, _OUTLINE_ITERATIONS, converged=converged_steps)
     index, value, sigma = [], [], []
@@ -159,7 +205,8 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     prior = (index, np.array(value), sum_sigma_px / np.array(sigma)) if index else None
     # The outline's edge points lie inside a thin side face's outer edge by (1 - its shade) times its
     # width: from there a fit of the shades finds them near the top's shade, and the edge where
-    # the outline put it. Middling shades first bring the box to the middle of that valley.
+    # the outline put it. Middling shades (or those other views tell) first bring the box to the
+    # middle of that valley.
     params, r, jac, keep = _robust(middling, params, free, _SUM_ITERATIONS, prior, converged_steps)
     params, r, jac = _least_squares(lambda p: sums(p, keep), params, free, _SUM_ITERATIONS, prior, converged_steps)
     rms = float(np.sqrt(np.mean(r**2))) if len(r) else math.inf
@@ -172,6 +219,17 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     if free_height and len(jac) > len(free):
         info = view_information(jac, r, params, rms)
     own = None if size_prior is None or normal_inv is None else _own_size(normal_inv, jac, r, params, free)
+    shades = None
+    if tell_shades and params[_H] > 0 and len(r) > len(free) + 2:
+        kept = windows if isinstance(keep, slice) else windows.subset(keep)
+        polygons, kinds = camera.faces(params)
+        solved = _shaded(lengths_in_faces(kept, polygons), kinds, kept.covered_px, None, shade_start, shade_hold)[1][0]
+        # The sums along one side may share an error of sum_sigma_px (the belt's level under them, the
+        # blur): a face w px wide tells its shade no better than sum_sigma_px / w.
+        width_px = np.zeros(3)
+        width_px[kinds] = _face_widths_px(polygons[0], px_per_norm)
+        floor = (sum_sigma_px / np.maximum(width_px[[SIDE_X, SIDE_Y]], 1e-9)) ** 2
+        shades = _view_shades(lambda p, s: sums(p, keep, s), params, solved, free, floor)
     x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0
@@ -182,7 +240,49 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
             info = (info[0][np.ix_(order, order)], info[1][order])
     rect = Rect(float(x), float(y), wrap_angle_deg(float(angle)), float(length), float(width))
     return BoxFit(rect, float(params[_H]), rms, size_cov, *info, len(windows),
-                  None if own is None else (float(own[0]), float(own[1])))
+                  None if own is None else (float(own[0]), float(own[1])), shades)
+
+
+def _face_widths_px(polygons: np.ndarray, px_per_norm: float) -> np.ndarray:
+    """Each face's width across its footprint edge (F; px): its area over that edge's length (a side
+    face's polygon runs footprint, footprint, top, top)."""
+    x, y = polygons[..., 0], polygons[..., 1]
+    area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1))
+    edge = np.hypot(x[:, 1] - x[:, 0], y[:, 1] - y[:, 0])
+    return px_per_norm * area / np.maximum(edge, 1e-12)
+
+
+def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, free: list[int],
+                 floor: np.ndarray) -> ViewShades:
+    """What one view tells of its side shades on its own: a Gauss-Newton step on the sums alone from the
+    fit's result (``params``, and the ``shades`` solved there, which a prior may have held), the box's
+    ``free`` parameters marginalised out (the pose and size differ from view to view; a sliver's shade
+    trades with its edge). ``residuals(boxes, shades)``: the sums' residuals (P, N) with those shades;
+    ``floor``: the least variance of each (end faces, long faces). A kind of face the view does not
+    show, or whose step leaves _SHADE_RANGE or reaches _SHADE_TOLD_MAX, gets an infinite variance."""
+    r = residuals(params[None], shades)[0]
+    steps = np.zeros((len(free), len(params)))
+    steps[np.arange(len(free)), free] = _STEP[free]
+    box_jac = (residuals(params + steps, shades) - r) / _STEP[free][:, None]
+    shade_jac = np.stack([(residuals(params[None], shades + d)[0] - r) / _SHADE_STEP for d in np.eye(2) * _SHADE_STEP])
+    jac = np.vstack([box_jac, shade_jac]).T
+    normal, grad = jac.T @ jac, jac.T @ r
+    box, shade = slice(0, len(free)), slice(len(free), len(free) + 2)
+    with np.errstate(all="ignore"):
+        coupling = np.linalg.lstsq(normal[box, box], normal[box, shade], rcond=None)[0]
+    info = normal[shade, shade] - normal[shade, box] @ coupling
+    reduced = grad[shade] - coupling.T @ grad[box]
+    # A face not shown moves no sum: its shade is untold (and out of the other's solution).
+    shown = np.diag(normal)[shade] > 1e-12
+    own, variances = shades.astype(np.float64), np.full(2, math.inf)
+    if shown.any():
+        sub = np.ix_(shown, shown)
+        cov = np.linalg.pinv(info[sub])
+        own[shown] = shades[shown] - cov @ reduced[shown]
+        variances[shown] = np.diag(cov) * max(float(np.mean(r**2)), 1e-12)
+    variances = np.maximum(variances, floor)
+    variances[~(variances > 0) | (own < _SHADE_RANGE[0]) | (own >= _SHADE_TOLD_MAX)] = math.inf
+    return ViewShades(float(params[_H]), (float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])))
 
 
 def _own_size(normal_inv: np.ndarray, jac: np.ndarray, r: np.ndarray, params: np.ndarray,

@@ -140,6 +140,10 @@ class MeasureConfig:
     # A box's coverage sums scatter by about this much (px, 1 sigma): it weighs a size known from a
     # track's other views against the sums of one view, where a thin side face leaves the size open.
     sum_sigma_px: float = 0.1
+    # --part-height auto: a part's track learns its side shades from its views once its height is voted
+    # on, and lends them to its fits (tracker/shades.py). Off by default: it brings the tests' 10 mm
+    # box at 10 deg from 1.4 to 0.5 mm once converged, but takes a 60 mm one from 0.4 to 0.8 (README).
+    learn_shades: bool = False
     # Parts whose sides differ by less than this (mm) are near square: which side is the length is
     # not told apart, so no known size is lent to their fit.
     square_mm: float = 1.0
@@ -183,6 +187,15 @@ class TrackConfig:
     # ... and a track's estimated height (--part-height auto), 1 sigma mm: loose enough that a view
     # still tells its own height (taken back out of the fit), tight enough to keep the fit near.
     known_height_sigma_mm: float = 0.2
+    # A box's side shades as its track's views tell them together (tracker/shades.py): lent to each fit
+    # no surer than known_shade_sigma (1 sigma, a fraction of the top's contrast; weighed as the size
+    # is, see measure.sum_sigma_px); a view counts no surer than shade_view_min_sigma, and not at all
+    # where it tells a shade worse than shade_view_max_sigma (a sliver too narrow to show it); what
+    # views told fades over shade_memory_views views (a face turning towards a lamp changes shade).
+    known_shade_sigma: float = 0.03
+    shade_view_min_sigma: float = 0.05
+    shade_view_max_sigma: float = 0.15
+    shade_memory_views: float = 100.0
     # --part-height auto (tracker/height.py). The vote: views this far apart along the part's path
     # (mm) fitted at each height of measure.height_starts_mm, their sizes expected to agree as well as
     # each view decides them, and no better than height_vote_size_sigma_mm (1 sigma); no view adds
@@ -252,6 +265,8 @@ class TrackConfig:
         _positive(self, *(f.name for f in fields(self)))
         if self.size_scatter_weight > 1:
             raise BadInput(f"track.size_scatter_weight: expected a weight in (0, 1], got {self.size_scatter_weight}")
+        if self.shade_memory_views < 1:
+            raise BadInput(f"track.shade_memory_views: expected at least 1 view, got {self.shade_memory_views}")
 
 
 @dataclass(frozen=True)

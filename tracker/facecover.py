@@ -169,7 +169,8 @@ def shaded_sums(total, level, kinds, covered, shades, solve, start, prior, low, 
     pixels (``total``, P x N x F, and the level pixel's shares ``level``; face f of kind ``kinds[f]``,
     0 the top) each times its kind's shade, over the level pixel's shade (at least ``min_level``).
     The side shades are ``shades`` (2,), or with ``solve`` those that best explain ``covered`` (N,),
-    found as boxfit._best_shades describes; they go to ``out_shades`` (P, 2)."""
+    found as boxfit._best_shades describes (from ``start``, held there by ``prior``: each (2,)); they
+    go to ``out_shades`` (P, 2)."""
     n_box, n_win, n_face = total.shape
     t = np.empty((n_win, 3))
     lv = np.empty((n_win, 3))
@@ -182,7 +183,7 @@ def shaded_sums(total, level, kinds, covered, shades, solve, start, prior, low, 
                 lv[n, kinds[f]] += level[p, n, f]
         s1, s2 = shades[0], shades[1]
         if solve:
-            s1, s2 = start, start
+            s1, s2 = start[0], start[1]
             for _ in range(rounds):
                 a11 = a12 = a22 = b1 = b2 = 0.0
                 for n in range(n_win):
@@ -195,10 +196,10 @@ def shaded_sums(total, level, kinds, covered, shades, solve, start, prior, low, 
                     a22 += x2 * x2
                     b1 += x1 * y
                     b2 += x2 * y
-                a11 += prior
-                a22 += prior
-                b1 += prior * start
-                b2 += prior * start
+                a11 += prior[0]
+                a22 += prior[1]
+                b1 += prior[0] * start[0]
+                b2 += prior[1] * start[1]
                 det = a11 * a22 - a12 * a12
                 s1 = min(max((a22 * b1 - a12 * b2) / det, low), high)
                 s2 = min(max((a11 * b2 - a12 * b1) / det, low), high)

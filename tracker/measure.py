@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from tracker.box import BoxCamera, EdgeWindows, compile_model
-from tracker.boxfit import CONVERGED_STEPS, PRECISE_STEPS, BoxFit, SizePrior, fit_box
+from tracker.boxfit import CONVERGED_STEPS, PRECISE_STEPS, BoxFit, ShadePrior, SizePrior, ViewShades, fit_box
 from tracker.calibration import apply_homography
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, refine_rect
@@ -70,6 +70,8 @@ class Measurement:
     # views a height is estimated from are told apart by it; unlike the poses it stays in the world
     # frame when a moving belt's parts are tracked in the belt's own (see moved).
     view_mm: tuple[float, float] | None = None
+    # A refined part's pose fit: what this view alone tells of its side faces' shades (tracker/shades.py).
+    view_shades: ViewShades | None = None
 
     @property
     def seen_at_mm(self) -> tuple[float, float]:
@@ -197,7 +199,8 @@ class Measurer:
                            size_cov_mm2=None if box is None else box.size_cov_mm2, flat_rect=flat_rect, trials=trials,
                            own_size_mm=None if box is None else box.own_size_mm,
                            shape_info=None if box is None else box.shape_info,
-                           shape_vec=None if box is None else box.shape_vec)
+                           shape_vec=None if box is None else box.shape_vec,
+                           view_shades=None if box is None else box.view_shades)
 
     def _flat_reading(self, crossed: _Crossed | None,
                       staircase: tuple[np.ndarray, Rect]) -> tuple[np.ndarray, Rect]:
@@ -275,14 +278,18 @@ class Measurer:
         if not cfg.estimate_height:
             return fit(cfg.part_height_mm, size_prior=self._size_of(known)), ()
         if known is not None and known.height_mm is not None:
-            # Its height voted on, being refined. Its pose: a box of that height, its size lent (with the
-            # height free too, a thin part's fit wanders along the valley where height trades with size).
-            pose = fit(known.height_mm, size_prior=self._size_of(known))
+            # Its height voted on, being refined. Its pose: a box of that height, its size and side shades
+            # lent (with the height free too, a thin part's fit wanders along the valley where height
+            # trades with size); what the view tells of the shades goes back to the track, from a sharp
+            # image only (a blur spreads a sliver's shade into its neighbours, and views misread it:
+            # 0.2-0.5 against a rendered 0.5-0.7, with the camera's or the textured model's blur).
+            pose = fit(known.height_mm, size_prior=self._size_of(known), shade_prior=known.shades,
+                       tell_shades=cfg.learn_shades and self._blur_px == 0)
             if not known.refine:
                 return pose, ()
             # What this view tells of the part's shape: fitted with the height free, height and size lent.
             view = fit(known.height_mm, free_height=True, size_prior=self._size_of(known),
-                       height_prior=(known.height_mm, known.height_sigma_mm))
+                       height_prior=(known.height_mm, known.height_sigma_mm), shade_prior=known.shades)
             if pose is None or view is None:
                 return pose, ()
             return replace(pose, shape_info=view.shape_info, shape_vec=view.shape_vec), ()
@@ -412,6 +419,8 @@ class KnownPart:
     last_vote_mm: tuple[float, float] | None = None
     vote_step_mm: float = 0.0
     leading_mm: float | None = None
+    # Being refined: the side shades its views have told (tracker/shades.py; None: none yet).
+    shades: ShadePrior | None = None
 
     def votes_at(self, x_mm: float, y_mm: float) -> bool:
         """Whether a view of it seen at (x, y) (world frame) votes (as HeightEstimate.wants_vote judges it)."""

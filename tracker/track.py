@@ -18,6 +18,7 @@ from tracker.height import HeightEstimate
 from tracker.kalman import ANGLE, LENGTH, VX, VY, WIDTH, X, Y, make_filter, set_interval
 from tracker.measure import KnownPart, Measurement
 from tracker.poses import TrackedObject
+from tracker.shades import ShadeEstimate
 
 
 class Track:
@@ -26,6 +27,9 @@ class Track:
         self.id = track_id
         # --part-height auto: what its views tell of its height (None: heights given, or none).
         self.height = HeightEstimate(cfg) if estimating_height else None
+        # --part-height auto with measure.learn_shades: its side shades as its views tell them, once its
+        # height is voted on.
+        self.shades: ShadeEstimate | None = None
         if self.height is not None:
             self.height.add(m, *m.seen_at_mm)
             # Its pose at the height its first view puts first.
@@ -93,6 +97,7 @@ class Track:
         # Its views so far were of another size (a sliver), and so told another shape.
         if self.height is not None:
             self.height = HeightEstimate(cfg)
+        self.shades = None
 
     def settled(self, cfg: TrackConfig) -> bool:
         return self.same_size >= cfg.coast_min_hits
@@ -107,6 +112,7 @@ class Track:
             leading = self.height.leading_mm, self.height.flat, self.height.voting
             self.height.add(m, *m.seen_at_mm)
             r = self.height.rect(m)
+            self._learn_shades(m, cfg)
             if leading != (self.height.leading_mm, self.height.flat, self.height.voting):
                 # Another height leads the vote (or it is decided): the part's footprint is where that
                 # height puts it, and of the size it needs, not the last one's.
@@ -135,6 +141,19 @@ class Track:
         self.kf.update(z.reshape(5, 1), R=r_cov)
         self._normalise()
         self._history.append((self.t_ns, self.kf.x.copy(), self.kf.P.copy()))
+
+    def _learn_shades(self, m: Measurement, cfg: TrackConfig) -> None:
+        """Add what view ``m`` tells of the part's side shades at its estimated height. None while the
+        height is voted on (again), nor for a flat part: the vote's boxes of other heights than the
+        part's pass for it with other shades (learnt and lent, a flat part's 5-10 mm boxes took a side
+        as bright as the top and led its vote; the shades an 8 mm box's 10 mm boxes learnt held its
+        refinement at 9.2 mm; tracker/shades.py)."""
+        if self.height.voting or self.height.flat:
+            self.shades = None
+        elif m.view_shades is not None:
+            if self.shades is None:
+                self.shades = ShadeEstimate(cfg)
+            self.shades.add(m.view_shades)
 
     def _reseat(self, r: Rect, cfg: TrackConfig) -> None:
         """Take the position and size of rectangle ``r`` as the part's (its sides in the filter's order):
@@ -177,7 +196,8 @@ class Track:
             sigma = sigma[[1, 0, 2]]
         size = SizePrior(float(length), float(width), float(sigma[0]), float(sigma[1]))
         return KnownPart(float(x[X]), float(x[Y]), size, self.height.height_mm, float(sigma[2]),
-                         refine=self.height.wants_refine)
+                         refine=self.height.wants_refine,
+                         shades=None if self.shades is None else self.shades.prior())
 
     def _normalise(self) -> None:
         """Keep the angle in (-90, 90] and the length the longer side (180 deg symmetry)."""
