@@ -45,7 +45,8 @@ _DEFAULT_START, _DEFAULT_HOLD = np.full(2, _SHADE_START), np.full(2, _SHADE_PRIO
 _SHADE_RANGE = (0.1, 1.5)
 # A view tells a side's shade below this only: a step that leaves the shades a side may have tells
 # none, nor does one as bright as the top (such a side looks like more of the top, and lent, it lets
-# a box of another height pass for the part: a flat part's 5-10 mm boxes learnt 1.0-1.2).
+# a box of another height pass for the part: when the vote's boxes learnt shades too, a flat part's
+# 5-10 mm boxes learnt 1.0-1.2 and led its vote).
 _SHADE_TOLD_MAX = 1.0
 # The step a shade's derivative is taken over (a fraction of the top's contrast).
 _SHADE_STEP = 0.01

@@ -187,11 +187,12 @@ class TrackConfig:
     # ... and a track's estimated height (--part-height auto), 1 sigma mm: loose enough that a view
     # still tells its own height (taken back out of the fit), tight enough to keep the fit near.
     known_height_sigma_mm: float = 0.2
-    # A box's side shades as its track's views tell them together (tracker/shades.py): lent to each fit
-    # no surer than known_shade_sigma (1 sigma, a fraction of the top's contrast; weighed as the size
-    # is, see measure.sum_sigma_px); a view counts no surer than shade_view_min_sigma, and not at all
-    # where it tells a shade worse than shade_view_max_sigma (a sliver too narrow to show it); what
-    # views told fades over shade_memory_views views (a face turning towards a lamp changes shade).
+    # With measure.learn_shades, a box's side shades as its track's views tell them together
+    # (tracker/shades.py): lent to each fit no surer than known_shade_sigma (1 sigma, a fraction of
+    # the top's contrast; weighed as the size is, see measure.sum_sigma_px); a view counts no surer
+    # than shade_view_min_sigma, and not at all where it tells a shade worse than
+    # shade_view_max_sigma (a sliver too narrow to show it); what views told fades over
+    # shade_memory_views views (a face turning towards a lamp changes shade).
     known_shade_sigma: float = 0.03
     shade_view_min_sigma: float = 0.05
     shade_view_max_sigma: float = 0.15
