@@ -10,7 +10,7 @@ frames before and after the track says its height has converged (the part's own 
 ghost a part in view at the start leaves behind). The last columns are the measurement stage's own
 time per frame (one part in view), with the height given, flat and estimated, in the same run, and
 with the height estimated its 99th percentile (the frames a part votes in). The last column is auto
-with measure.learn_shades (tracker/shades.py).
+without measure.learn_shades (tracker/shades.py).
 """
 
 from __future__ import annotations
@@ -117,8 +117,8 @@ def measure_all(quick: bool = False) -> list[dict]:
         row["auto_measure_ms"], row["auto_measure_p99_ms"] = auto_ms["ms"], auto_ms["p99_ms"]
         row["auto"] = auto_errors(auto_poses, auto_truths) | {
             "centroid_mean_mm": evaluate(auto_poses, auto_truths, skip_first=2).summary()["centroid_mean_mm"]}
-        # The same with measure.learn_shades (off by default: see the README).
-        row["auto_shades"] = auto_errors(*run(scene, MeasureConfig(estimate_height=True, learn_shades=True)))
+        # The same without measure.learn_shades (see the README).
+        row["auto_shades"] = auto_errors(*run(scene, MeasureConfig(estimate_height=True, learn_shades=False)))
         rows.append(row)
     return rows
 
@@ -135,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     print("| scene | given: centroid mean / p95 (mm) | angle mean (deg) | length / width max (mm) | flat: centroid "
           "mean (mm) | auto: height before / after converged (mm) | auto: centroid before / after (mm) "
           "| auto: converged | measure ms/frame: given / flat / auto | auto: measure p99 ms "
-          "| auto, shades learnt: height after converged (mm), converged |")
+          "| auto, no shades learnt: height after converged (mm), converged |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         g, a = r.get("given"), r["auto"]

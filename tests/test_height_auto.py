@@ -54,8 +54,9 @@ def _centroid_mm(o: dict, t: dict) -> float:
     return math.hypot(o["x_mm"] - t["x_mm"], o["y_mm"] - t["y_mm"])
 
 
-# The cells of the tests' grid that meet the issue's bounds (the README lists all 15).
-@pytest.mark.parametrize("height_mm,tilt_deg", [(5, 20), (10, 20), (20, 0), (20, 20), (60, 10), (60, 20)])
+# The cells of the tests' grid that meet the issue's bounds (the README lists all 15). 10 mm at 10 deg
+# does since its track learns its side shades (tests/test_shades.py says what it was without).
+@pytest.mark.parametrize("height_mm,tilt_deg", [(5, 20), (10, 10), (10, 20), (20, 0), (20, 20), (60, 10), (60, 20)])
 def test_auto_estimates_a_box_height(height_mm, tilt_deg):
     """Converged within the first third of the part's crossing; from then on its height within 0.5 mm
     and its centroid within 0.2 mm mean (the issue's bounds), and within 1 mm mean before."""

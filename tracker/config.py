@@ -141,9 +141,10 @@ class MeasureConfig:
     # track's other views against the sums of one view, where a thin side face leaves the size open.
     sum_sigma_px: float = 0.1
     # --part-height auto: a part's track learns its side shades from its views once its height is voted
-    # on, and lends them to its fits (tracker/shades.py). Off by default: it brings the tests' 10 mm
-    # box at 10 deg from 1.4 to 0.5 mm once converged, but takes a 60 mm one from 0.4 to 0.8 (README).
-    learn_shades: bool = False
+    # on, and lends them to its fits where a side face is a sliver (tracker/shades.py): one view of a
+    # sliver settles its shade wherever its fit starts, and its height comes out off (the tests' 10 mm
+    # box at 10 deg: 1.4 mm once converged without, 0.48 with).
+    learn_shades: bool = True
     # Parts whose sides differ by less than this (mm) are near square: which side is the length is
     # not told apart, so no known size is lent to their fit.
     square_mm: float = 1.0
