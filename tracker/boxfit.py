@@ -189,19 +189,19 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
         w = windows if isinstance(which, slice) else windows.subset(which)
         return w.covered_px - predicted_sums(camera, w, p, shades, shade_start, shade_hold)
 
-    mid = [shade_start]  # where the side shades start: set once the outline has brought the box near
-
-    def middling(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
-        return sums(p, which, mid[0])
-
     params, r, jac, _ = _robust(outline, params, free, _OUTLINE_ITERATIONS, converged=converged_steps)
+    middle = shade_start
     if shade_prior is not None:
         # A side face wider than a window's inner half fills that half: its sums read its shade apart
         # from its edge, and the fit starts it middling. A narrower one trades them, and its fit ends
         # in that valley near where it starts: at the shade the track's views tell (started there,
         # a 60 mm box's wide faces took the views' slightly biased shades: 0.44 -> 0.79 mm off).
-        mid[0] = np.where(_side_widths_px(camera, params, px_per_norm) >= windows.span_px / 2, _SHADE_START,
+        middle = np.where(_side_widths_px(camera, params, px_per_norm) >= windows.span_px / 2, _SHADE_START,
                           shade_start)
+
+    def middling(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
+        return sums(p, which, middle)
+
     index, value, sigma = [], [], []
     if size_prior is not None:
         # Start the sums' fit at the known size too: in a flat valley it need not travel far.
