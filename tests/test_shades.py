@@ -19,7 +19,7 @@ from tracker.synthetic import _SIDE_SHADE
 
 
 def _view(end: float, long: float, end_sigma: float = 0.02, long_sigma: float = math.inf) -> ViewShades:
-    return ViewShades(5.0, (end, long), (end_sigma**2, long_sigma**2))
+    return ViewShades((end, long), (end_sigma**2, long_sigma**2))
 
 
 def test_views_weigh_as_surely_as_they_tell_the_shade_and_no_surer():

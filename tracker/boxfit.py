@@ -111,11 +111,10 @@ class ShadePrior:
 @dataclass(frozen=True)
 class ViewShades:
     """The side shades (end faces, long faces) one view of a box tells on its own, any prior taken back
-    out, and their variances (inf: the view shows no such face, or cannot tell its shade); fitted with
-    a box ``height_mm`` tall. A thin part's side face is a sliver whose shade trades with its edge:
-    one view decides it poorly, and the same part's views decide it together (tracker/shades.py)."""
+    out, and their variances (inf: the view shows no such face, or cannot tell its shade). A thin
+    part's side face is a sliver whose shade trades with its edge: one view decides it poorly, and the
+    same part's views decide it together (tracker/shades.py)."""
 
-    height_mm: float
     shades: tuple[float, float]
     variances: tuple[float, float]
 
@@ -196,7 +195,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
         # from its edge, and the fit starts it middling. A narrower one trades them, and its fit ends
         # in that valley near where it starts: at the shade the track's views tell (started there,
         # a 60 mm box's wide faces took the views' slightly biased shades: 0.44 -> 0.79 mm off).
-        middle = np.where(_side_widths_px(camera, params, px_per_norm) >= windows.span_px / 2, _SHADE_START,
+        middle = np.where(_side_widths_px(*camera.faces(params), px_per_norm) >= windows.span_px / 2, _SHADE_START,
                           shade_start)
 
     def middling(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
@@ -233,11 +232,13 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     if tell_shades and params[_H] > 0 and len(r) > len(free) + 2:
         kept = windows if isinstance(keep, slice) else windows.subset(keep)
         polygons, kinds = camera.faces(params)
-        solved = _shaded(lengths_in_faces(kept, polygons), kinds, kept.covered_px, None, shade_start, shade_hold)[1][0]
+        predicted, solved = _shaded(lengths_in_faces(kept, polygons), kinds, kept.covered_px, None, shade_start,
+                                    shade_hold)
         # The sums along one side may share an error of sum_sigma_px (the belt's level under them, the
         # blur): a face w px wide tells its shade no better than sum_sigma_px / w.
-        floor = (sum_sigma_px / np.maximum(_side_widths_px(camera, params, px_per_norm), 1e-9)) ** 2
-        shades = _view_shades(lambda p, s: sums(p, keep, s), params, solved, free, floor)
+        floor = (sum_sigma_px / np.maximum(_side_widths_px(polygons, kinds, px_per_norm), 1e-9)) ** 2
+        shades = _view_shades(lambda p, s: sums(p, keep, s), params, solved[0], kept.covered_px - predicted[0],
+                              free, floor)
     x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0
@@ -251,11 +252,10 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
                   None if own is None else (float(own[0]), float(own[1])), shades)
 
 
-def _side_widths_px(camera: BoxCamera, params: np.ndarray, px_per_norm: float) -> np.ndarray:
-    """How wide the box's end face and long face the camera sees are in the image (2,; px, 0: not
-    seen): each face's area over its footprint edge's length (a side face's polygon runs footprint,
-    footprint, top, top)."""
-    polygons, kinds = camera.faces(params)
+def _side_widths_px(polygons: np.ndarray, kinds: np.ndarray, px_per_norm: float) -> np.ndarray:
+    """How wide a box's end face and long face the camera sees are in the image (2,; px, 0: not seen),
+    from its faces (BoxCamera.faces of one box): each face's area over its footprint edge's length (a
+    side face's polygon runs footprint, footprint, top, top)."""
     x, y = polygons[0, ..., 0], polygons[0, ..., 1]
     area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1))
     edge = np.hypot(x[:, 1] - x[:, 0], y[:, 1] - y[:, 0])
@@ -264,15 +264,15 @@ def _side_widths_px(camera: BoxCamera, params: np.ndarray, px_per_norm: float) -
     return widths[[SIDE_X, SIDE_Y]]
 
 
-def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, free: list[int],
+def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarray, free: list[int],
                  floor: np.ndarray) -> ViewShades:
     """What one view tells of its side shades on its own: a Gauss-Newton step on the sums alone from the
     fit's result (``params``, and the ``shades`` solved there, which a prior may have held), the box's
     ``free`` parameters marginalised out (the pose and size differ from view to view; a sliver's shade
-    trades with its edge). ``residuals(boxes, shades)``: the sums' residuals (P, N) with those shades;
-    ``floor``: the least variance of each (end faces, long faces). A kind of face the view does not
-    show, or whose step leaves _SHADE_RANGE or reaches _SHADE_TOLD_MAX, gets an infinite variance."""
-    r = residuals(params[None], shades)[0]
+    trades with its edge). ``residuals(boxes, shades)``: the sums' residuals (P, N) with those shades,
+    ``r`` theirs at the fit's result; ``floor``: the least variance of each (end faces, long faces). A
+    kind of face the view does not show, or whose step leaves _SHADE_RANGE or reaches _SHADE_TOLD_MAX,
+    gets an infinite variance."""
     steps = np.zeros((len(free), len(params)))
     steps[np.arange(len(free)), free] = _STEP[free]
     box_jac = (residuals(params + steps, shades) - r) / _STEP[free][:, None]
@@ -294,7 +294,7 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, free: list[i
         variances[shown] = np.diag(cov) * max(float(np.mean(r**2)), 1e-12)
     variances = np.maximum(variances, floor)
     variances[~(variances > 0) | (own < _SHADE_RANGE[0]) | (own >= _SHADE_TOLD_MAX)] = math.inf
-    return ViewShades(float(params[_H]), (float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])))
+    return ViewShades((float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])))
 
 
 def _own_size(normal_inv: np.ndarray, jac: np.ndarray, r: np.ndarray, params: np.ndarray,

@@ -11,8 +11,8 @@ wide enough tell its shade, and the track lends it to the rest, as it lends its 
 (``track.known_shade_sigma``). Views count as surely as they tell the shade, from
 ``track.shade_view_min_sigma`` down; one that tells it worse than ``track.shade_view_max_sigma`` is
 left out; and the oldest views weigh less than the newest (``track.shade_memory_views``): a face
-turning towards or away from a lamp changes its shade. With ``measure.learn_shades`` (off by
-default: the README says what it gains and costs), a track learns them once its part's height is
+turning towards or away from a lamp changes its shade. With ``measure.learn_shades`` (on by
+default; the README says what it gains and costs), a track learns them once its part's height is
 voted on (see Track._learn_shades), from sharp images only.
 """
 
@@ -27,7 +27,7 @@ from tracker.config import TrackConfig
 
 
 class ShadeEstimate:
-    """The side shades (end faces, long faces) a track's views tell, for boxes of one height."""
+    """The side shades (end faces, long faces) a track's views tell of its part at its estimated height."""
 
     def __init__(self, cfg: TrackConfig) -> None:
         self._cfg = cfg
@@ -52,7 +52,7 @@ class ShadeEstimate:
         if not np.any(self._weight > 0):
             return None
         told = self._weight > 0
-        shades = np.where(told, self._weighted / np.where(told, self._weight, 1.0), 0.5)
-        sigma = np.where(told, np.maximum(1.0 / np.sqrt(np.where(told, self._weight, 1.0)),
-                                          self._cfg.known_shade_sigma), math.inf)
+        shades = np.divide(self._weighted, self._weight, out=np.full(2, 0.5), where=told)
+        sigma = np.maximum(np.divide(1.0, np.sqrt(self._weight), out=np.full(2, math.inf), where=told),
+                           self._cfg.known_shade_sigma)
         return ShadePrior((float(shades[0]), float(shades[1])), (float(sigma[0]), float(sigma[1])))
