@@ -2,9 +2,9 @@
 (tracker/height.py), against exact truth on rendered boxes; and the vote itself on made-up views.
 
 Measured on these scenes (480x360, 80x50 mm parts crossing the view while turning): once converged,
-the height within 0.06-0.33 mm on average and the centroid within 0.04-0.06 mm for the cells tested
-here; flat parts flat in every converged frame. Cells not tested here miss the issue's bounds (the
-README lists them): 5 mm at 0 and 10 deg, 10 mm at 0 and 10 deg.
+the height within 0.06-0.35 mm on average (0.48 at worst) and the centroid within 0.02-0.14 mm for
+the cells tested here; flat parts flat in every converged frame. Cells not tested here miss the
+issue's bounds (the README lists them): 5 mm at 0 and 10 deg.
 """
 
 from __future__ import annotations
@@ -55,8 +55,10 @@ def _centroid_mm(o: dict, t: dict) -> float:
 
 
 # The cells of the tests' grid that meet the issue's bounds (the README lists all 15). 10 mm at 10 deg
-# does since its track learns its side shades (tests/test_shades.py says what it was without).
-@pytest.mark.parametrize("height_mm,tilt_deg", [(5, 20), (10, 10), (10, 20), (20, 0), (20, 20), (60, 10), (60, 20)])
+# does since its track learns its side shades (tests/test_shades.py says what it was without); 10 mm
+# straight down since a converged height stays converged (track.height_unconverged_sigma_mm).
+@pytest.mark.parametrize("height_mm,tilt_deg", [(5, 20), (10, 0), (10, 10), (10, 20), (20, 0), (20, 10), (20, 20),
+                                                (60, 0), (60, 10), (60, 20)])
 def test_auto_estimates_a_box_height(height_mm, tilt_deg):
     """Converged within the first third of the part's crossing; from then on its height within 0.5 mm
     and its centroid within 0.2 mm mean (the issue's bounds), and within 1 mm mean before."""
@@ -135,9 +137,9 @@ def test_a_flat_part_is_voted_flat_and_measured_as_flat():
     assert height.rect(m) == m.flat_rect
 
 
-def _voted_20_mm() -> tuple[TrackConfig, HeightEstimate]:
+def _voted_20_mm(cfg: TrackConfig | None = None) -> tuple[TrackConfig, HeightEstimate]:
     """A part 20 mm tall voted on by as few views as decide it: now refined."""
-    cfg = TrackConfig()
+    cfg = cfg or TrackConfig()
     height = HeightEstimate(cfg)
     for k in range(cfg.height_vote_min_views):
         x = k * cfg.height_vote_step_mm
@@ -178,6 +180,30 @@ def test_views_that_scatter_more_than_they_claim_converge_only_as_their_scatter_
         converged.append(height.converged)
     assert not any(converged[:cfg.height_converged_views + 2]) and converged[-1], converged
     assert height.height_mm == pytest.approx(20.0, abs=0.2)
+
+
+def test_a_converged_height_stays_converged_until_its_uncertainty_passes_the_second_limit():
+    """Hysteresis: views that agree converge the height (its sigma below track.height_converged_sigma_mm);
+    views that scatter by +-2.5 mm (each within the gate) then widen it to 0.30-0.34 mm (measured),
+    and it stays converged while below track.height_unconverged_sigma_mm; once past it, not until it
+    is below the first limit again. The limits here are 0.25 and 0.32 mm (the defaults, 0.3 and 0.5,
+    are farther apart than such views widen the estimate). On the tests' 10 mm box straight
+    down its sigma went from 0.29 to 0.301 mm and back, and, without this, what the PLC reads with it."""
+    cfg, height = _voted_20_mm(TrackConfig(height_converged_sigma_mm=0.25, height_unconverged_sigma_mm=0.32))
+    for _ in range(cfg.height_converged_views):
+        height.add(_refining_view(20.0), 0.0, 0.0)
+    assert height.converged
+    sigmas, converged = [], []
+    for k in range(4 * cfg.height_converged_views):
+        height.add(_refining_view(20.0 + (2.5 if k % 2 else -2.5)), 0.0, 0.0)
+        sigmas.append(math.sqrt(height.shape()[1][2, 2]))
+        converged.append(height.converged)
+    # Up to the first view that widens it past the second limit, converged; from there on, not, until
+    # it is below the first limit again.
+    past = next(k for k, s in enumerate(sigmas) if s >= cfg.height_unconverged_sigma_mm)
+    assert any(s >= cfg.height_converged_sigma_mm for s in sigmas[:past]) and all(converged[:past])
+    after = [c for s, c in zip(sigmas[past:], converged[past:], strict=True) if s >= cfg.height_converged_sigma_mm]
+    assert len(after) >= 3 and not any(after), (sigmas, converged)
 
 
 def test_a_view_that_disagrees_is_left_out_and_many_start_the_vote_again():

@@ -228,6 +228,10 @@ class TrackConfig:
     height_converged_sigma_mm: float = 0.3
     height_converged_views: int = 5
     height_refine_every: int = 3
+    # A converged height stays converged until its uncertainty exceeds this (mm), or its views vote
+    # again: later views' scatter widens it (see height.py's _spread), and on the tests' 10 mm box
+    # straight down it went from 0.29 to 0.301 and back, flipping what the PLC reads twice.
+    height_unconverged_sigma_mm: float = 0.5
     # Process noise: how hard parts may accelerate / turn / change apparent size.
     accel_sigma_mm_s2: float = 2000.0
     angular_accel_sigma_deg_s2: float = 200.0
@@ -269,6 +273,9 @@ class TrackConfig:
             raise BadInput(f"track.size_scatter_weight: expected a weight in (0, 1], got {self.size_scatter_weight}")
         if self.shade_memory_views < 1:
             raise BadInput(f"track.shade_memory_views: expected at least 1 view, got {self.shade_memory_views}")
+        if self.height_unconverged_sigma_mm < self.height_converged_sigma_mm:
+            raise BadInput(f"track.height_unconverged_sigma_mm: expected >= height_converged_sigma_mm "
+                           f"({self.height_converged_sigma_mm}), got {self.height_unconverged_sigma_mm}")
 
 
 @dataclass(frozen=True)

@@ -23,8 +23,9 @@ size. The estimate has two stages.
    estimate beyond ``track.view_gate_chi2`` is left out (a hand over the part, a fit gone astray); one
    that keeps disagreeing for ``track.view_gate_frames`` views starts the vote again. The height has
    converged once its uncertainty is below ``track.height_converged_sigma_mm`` over
-   ``track.height_converged_views`` views; from then on every ``track.height_refine_every``-th view
-   still tells its own.
+   ``track.height_converged_views`` views, and stays so until it exceeds
+   ``track.height_unconverged_sigma_mm`` (or the vote is held again); from then on every
+   ``track.height_refine_every``-th view still tells its own.
 """
 
 from __future__ import annotations
@@ -96,6 +97,7 @@ class HeightEstimate:
         self._chi2s: list[float] = []  # each refining view's disagreement with the estimate
         self._disagreeing = 0
         self._since_refine = 0  # views since the last that told its own shape
+        self._converged = False  # see converged
 
     @property
     def voting(self) -> bool:
@@ -126,6 +128,7 @@ class HeightEstimate:
             if m.shape_info is not None:
                 self._since_refine = 0
                 self._refine(m.shape_info, m.shape_vec)
+        self._settle()
 
     @property
     def leading_mm(self) -> float | None:
@@ -172,12 +175,17 @@ class HeightEstimate:
     @property
     def converged(self) -> bool:
         """Whether the height is settled: flat, or refined to track.height_converged_sigma_mm over
-        track.height_converged_views views."""
-        if self.flat:
-            return True
+        track.height_converged_views views; once settled, until its uncertainty exceeds
+        track.height_unconverged_sigma_mm (or the views vote again)."""
+        return self.flat or self._converged
+
+    def _settle(self) -> None:
         shape = self.shape()
-        return (shape is not None and self._refine_views >= self._cfg.height_converged_views
-                and math.sqrt(shape[1][2, 2]) < self._cfg.height_converged_sigma_mm)
+        if shape is None or self._refine_views < self._cfg.height_converged_views:
+            self._converged = False
+            return
+        limit_mm = self._cfg.height_unconverged_sigma_mm if self._converged else self._cfg.height_converged_sigma_mm
+        self._converged = math.sqrt(shape[1][2, 2]) < limit_mm
 
     def rect(self, m: Measurement) -> Rect:
         """The pose to take from view ``m``: its flat measurement when flat leads (or is decided), its trial
