@@ -48,6 +48,13 @@ _SHADE_RANGE = (0.1, 1.5)
 # a box of another height pass for the part: when the vote's boxes learnt shades too, a flat part's
 # 5-10 mm boxes learnt 1.0-1.2 and led its vote).
 _SHADE_TOLD_MAX = 1.0
+# How many of its sigmas a view's shade has to lie outside the shades a side may have for the view to
+# tell a side no part has (ViewShades.outside).
+_OUTSIDE_SIGMAS = 2.0
+# ... and the face at least this wide (px): a narrower one has no pixel of its own, its shade and its
+# width are read as one product, and the linear step that tells its shade misjudges how unsure it is
+# (the tests' 10 mm box near the view's middle, its faces 0.1-0.3 px: told brighter than its top).
+_OUTSIDE_MIN_WIDTH_PX = 1.0
 # The step a shade's derivative is taken over (a fraction of the top's contrast).
 _SHADE_STEP = 0.01
 # Reweighting rounds of the shades' solution (their sums are ratios, linear once the level is fixed).
@@ -117,6 +124,10 @@ class ViewShades:
 
     shades: tuple[float, float]
     variances: tuple[float, float]
+    # Whether the view tells, beyond _OUTSIDE_SIGMAS of its uncertainty, a shade no side has (at least
+    # the top's, or below _SHADE_RANGE): a box of this height explains the view only as some other
+    # shape would (a taller box's sides as bright as its top pass for a flat part's larger top).
+    outside: tuple[bool, bool] = (False, False)
 
 
 def predicted_sums(camera: BoxCamera, windows: EdgeWindows, params: np.ndarray, shades: np.ndarray | None = None,
@@ -236,9 +247,10 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
                                     shade_hold)
         # The sums along one side may share an error of sum_sigma_px (the belt's level under them, the
         # blur): a face w px wide tells its shade no better than sum_sigma_px / w.
-        floor = (sum_sigma_px / np.maximum(_side_widths_px(polygons, kinds, px_per_norm), 1e-9)) ** 2
+        widths = _side_widths_px(polygons, kinds, px_per_norm)
+        floor = (sum_sigma_px / np.maximum(widths, 1e-9)) ** 2
         shades = _view_shades(lambda p, s: sums(p, keep, s), params, solved[0], kept.covered_px - predicted[0],
-                              free, floor)
+                              free, floor, widths >= _OUTSIDE_MIN_WIDTH_PX)
     x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0
@@ -265,14 +277,15 @@ def _side_widths_px(polygons: np.ndarray, kinds: np.ndarray, px_per_norm: float)
 
 
 def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarray, free: list[int],
-                 floor: np.ndarray) -> ViewShades:
+                 floor: np.ndarray, wide: np.ndarray) -> ViewShades:
     """What one view tells of its side shades on its own: a Gauss-Newton step on the sums alone from the
     fit's result (``params``, and the ``shades`` solved there, which a prior may have held), the box's
     ``free`` parameters marginalised out (the pose and size differ from view to view; a sliver's shade
     trades with its edge). ``residuals(boxes, shades)``: the sums' residuals (P, N) with those shades,
-    ``r`` theirs at the fit's result; ``floor``: the least variance of each (end faces, long faces). A
-    kind of face the view does not show, or whose step leaves _SHADE_RANGE or reaches _SHADE_TOLD_MAX,
-    gets an infinite variance."""
+    ``r`` theirs at the fit's result; ``floor``: the least variance of each (end faces, long faces);
+    ``wide``: whether each is wide enough to tell a shade no side has (ViewShades.outside). A kind of
+    face the view does not show, or whose step leaves _SHADE_RANGE or reaches _SHADE_TOLD_MAX, gets an
+    infinite variance."""
     steps = np.zeros((len(free), len(params)))
     steps[np.arange(len(free)), free] = _STEP[free]
     box_jac = (residuals(params + steps, shades) - r) / _STEP[free][:, None]
@@ -293,8 +306,11 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
         own[shown] = shades[shown] - cov @ reduced[shown]
         variances[shown] = np.diag(cov) * max(float(np.mean(r**2)), 1e-12)
     variances = np.maximum(variances, floor)
+    margin = _OUTSIDE_SIGMAS * np.sqrt(variances)
+    outside = wide & ((own + margin < _SHADE_RANGE[0]) | (own - margin >= _SHADE_TOLD_MAX))
     variances[~(variances > 0) | (own < _SHADE_RANGE[0]) | (own >= _SHADE_TOLD_MAX)] = math.inf
-    return ViewShades((float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])))
+    return ViewShades((float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])),
+                      (bool(outside[0]), bool(outside[1])))
 
 
 def _own_size(normal_inv: np.ndarray, jac: np.ndarray, r: np.ndarray, params: np.ndarray,

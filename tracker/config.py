@@ -145,6 +145,10 @@ class MeasureConfig:
     # sliver settles its shade wherever its fit starts, and its height comes out off (the tests' 10 mm
     # box at 10 deg: 1.4 mm once converged without, 0.48 with).
     learn_shades: bool = True
+    # --part-height auto: a vote's view whose box of a height explains it only with a side face as
+    # bright as the top (or darker than the belt's level allows) counts against that height as a view
+    # no box of it explains (tracker/height.py), from a sharp image only.
+    vote_on_shades: bool = True
     # Parts whose sides differ by less than this (mm) are near square: which side is the length is
     # not told apart, so no known size is lent to their fit.
     square_mm: float = 1.0

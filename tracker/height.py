@@ -44,6 +44,7 @@ from tracker.geometry import Rect
 _SHAPE_DOF = 3.0
 
 if TYPE_CHECKING:
+    from tracker.boxfit import ViewShades
     from tracker.measure import Measurement
 
 
@@ -66,6 +67,13 @@ class HeightTrial:
     size_var_mm2: tuple[float, float] = (math.inf, math.inf)
     # False: no box of this height explains the view (rect is the plain measurement's).
     fitted: bool = True
+    # What the view tells of this box's side shades (None: not told, a blurred image or no sides).
+    shades: ViewShades | None = None
+
+    @property
+    def shades_outside(self) -> bool:
+        """Whether the box explains the view only with a side face of a shade no side has."""
+        return self.shades is not None and any(self.shades.outside)
 
     def __post_init__(self) -> None:
         if not (self.height_mm >= 0 and self.rms_px >= 0 and self.windows > 0 and min(self.size_var_mm2) >= 0):
@@ -89,6 +97,7 @@ class HeightEstimate:
         self._sizes: list[np.ndarray] = []
         self._size_vars: list[np.ndarray] = []
         self._fitted: list[np.ndarray] = []  # (K,) whether each height's box explained the view
+        self._outside: list[np.ndarray] = []  # (K,) whether it did only with a shade no side has
         self._last_vote_mm: np.ndarray | None = None  # where the part was at the last vote
         # The refinement: the information on (length, width, height) and its vector.
         self._info: np.ndarray | None = None
@@ -206,6 +215,7 @@ class HeightEstimate:
         self._last_vote_mm = np.array([x_mm, y_mm])
         trials = tuple(by_height[h] for h in self.heights_mm)
         self._fitted.append(np.array([t.fitted for t in trials]))
+        self._outside.append(np.array([t.shades_outside for t in trials]))
         mse = np.array([t.rms_px**2 for t in trials])
         windows = min(t.windows for t in trials)
         # How much worse each height explains this view than its best, in windows: a view whose edges
@@ -226,6 +236,9 @@ class HeightEstimate:
         scatter = np.minimum((sizes - mean) ** 2 * weights, self._cfg.height_vote_view_cap)
         # A view no box of a height explains counts against it as much as a view can.
         scatter[~np.array(self._fitted)] = self._cfg.height_vote_view_cap
+        # So does one its box explains only with a side face as bright as its top (or as dark as the
+        # belt): the shape of another part (a taller box's bright sides pass for a flat part's top).
+        scatter[np.array(self._outside)] = self._cfg.height_vote_view_cap
         return self._cfg.height_vote_cost_weight * excess + np.sum(scatter, axis=(0, 2))
 
     def _sizes_weighed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -311,13 +311,15 @@ class Measurer:
                 heights_mm: tuple[float, ...]) -> tuple[list[BoxFit], tuple[HeightTrial, ...]]:
         """A box of each height, its size free: those that fit, and the trials."""
         cfg = self.config
-        fits = [(h, fit(h)) for h in heights_mm]
+        tell = cfg.vote_on_shades and self._blur_px == 0
+        fits = [(h, fit(h, tell_shades=tell and h > 0)) for h in heights_mm]
         boxes = [f for _, f in fits if f is not None]
         if not boxes:
             return [], ()
         # A height no box of explains (worse than box_max_rms_px) votes as if it had just that.
         trials = tuple(HeightTrial(h, rect, cfg.box_max_rms_px, len(windows), fitted=False) if f is None else
-                       HeightTrial(h, f.rect, f.rms_px, f.windows, _size_variances(f)) for h, f in fits)
+                       HeightTrial(h, f.rect, f.rms_px, f.windows, _size_variances(f), shades=f.view_shades)
+                       for h, f in fits)
         return boxes, trials
 
     def _rect_on_plane(self, points_norm: np.ndarray, height_mm: float) -> Rect:
