@@ -147,7 +147,8 @@ class MeasureConfig:
     learn_shades: bool = True
     # --part-height auto: a vote's view whose box of a height explains it only with a side face as
     # bright as the top (or darker than the belt's level allows) counts against that height as a view
-    # no box of it explains (tracker/height.py), from a sharp image only.
+    # no box of it explains (tracker/height.py), from a sharp image only. Off where lamps light the
+    # parts' sides brighter than their tops: there it would count against the part's own height.
     vote_on_shades: bool = True
     # Parts whose sides differ by less than this (mm) are near square: which side is the length is
     # not told apart, so no known size is lent to their fit.

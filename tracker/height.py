@@ -70,14 +70,14 @@ class HeightTrial:
     # What the view tells of this box's side shades (None: not told, a blurred image or no sides).
     shades: ViewShades | None = None
 
+    def __post_init__(self) -> None:
+        if not (self.height_mm >= 0 and self.rms_px >= 0 and self.windows > 0 and min(self.size_var_mm2) >= 0):
+            raise ValueError(f"height trial: expected height >= 0, rms >= 0 and windows > 0, got {self}")
+
     @property
     def shades_outside(self) -> bool:
         """Whether the box explains the view only with a side face of a shade no side has."""
         return self.shades is not None and any(self.shades.outside)
-
-    def __post_init__(self) -> None:
-        if not (self.height_mm >= 0 and self.rms_px >= 0 and self.windows > 0 and min(self.size_var_mm2) >= 0):
-            raise ValueError(f"height trial: expected height >= 0, rms >= 0 and windows > 0, got {self}")
 
 
 class HeightEstimate:

@@ -305,7 +305,10 @@ class Measurer:
             # Flat leads the vote: the pose is the plain measurement's (as with no box at all: a
             # cylinder lying down, a bag).
             return None, trials
-        return next((b for b in boxes if b.height_mm == lead), min(boxes, key=lambda f: f.rms_px)), trials
+        box = next((b for b in boxes if b.height_mm == lead), min(boxes, key=lambda f: f.rms_px))
+        # What its shades tell counts in the vote; the track learns them (from the view that decides it
+        # on) only with learn_shades.
+        return (box if cfg.learn_shades else replace(box, view_shades=None)), trials
 
     def _trials(self, fit, rect: Rect, windows: EdgeWindows,
                 heights_mm: tuple[float, ...]) -> tuple[list[BoxFit], tuple[HeightTrial, ...]]:
