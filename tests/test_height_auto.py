@@ -139,7 +139,7 @@ def test_a_height_whose_boxes_need_a_side_brighter_than_the_top_loses_the_vote()
     the 10 mm box only with an end face brighter than its top (boxfit.ViewShades.outside): a taller
     box's bright sides pass for more of a thinner part's top, and no side is lit brighter than the
     top of the same part under the light over a belt (a flat part's 10 mm boxes do this). Each such
-    view counts against the height as a view no box of it explains."""
+    view counts against the height as if its sizes disagreed as much as a view's can."""
     cfg = TrackConfig()
     both = {0.0: 85.0, 5.0: 80.0, 10.0: 80.0, 20.0: 70.0}
     for outside_mm, winner_mm in (((10.0,), 5.0), ((5.0,), 10.0)):

@@ -49,7 +49,9 @@ _SHADE_RANGE = (0.1, 1.5)
 # 5-10 mm boxes learnt 1.0-1.2 and led its vote).
 _SHADE_TOLD_MAX = 1.0
 # How many of its sigmas a view's shade has to lie outside the shades a side may have for the view to
-# tell a side no part has (ViewShades.outside).
+# tell a side no part has (ViewShades.outside): a vote's height is counted against on it, so one
+# view's noise should rarely do it (2 sigma: about 2 % of views at a side's limit; the tests' boxes' own
+# heights were flagged in none of their vote's views).
 _OUTSIDE_SIGMAS = 2.0
 # ... and the face at least this wide (px): a narrower one has no pixel of its own, its shade and its
 # width are read as one product, and the linear step that tells its shade misjudges how unsure it is

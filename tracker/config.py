@@ -146,9 +146,10 @@ class MeasureConfig:
     # box at 10 deg: 1.4 mm once converged without, 0.48 with).
     learn_shades: bool = True
     # --part-height auto: a vote's view whose box of a height explains it only with a side face as
-    # bright as the top (or darker than the belt's level allows) counts against that height as a view
-    # no box of it explains (tracker/height.py), from a sharp image only. Off where lamps light the
-    # parts' sides brighter than their tops: there it would count against the part's own height.
+    # bright as the top (or darker than the belt's level allows) counts against that height as if its
+    # sizes disagreed as much as a view's can (tracker/height.py), from a sharp image only. Off where
+    # lamps light the parts' sides brighter than their tops: there it would count against the part's
+    # own height. (The track's learnt shades, measure.learn_shades, do not depend on it.)
     vote_on_shades: bool = True
     # Parts whose sides differ by less than this (mm) are near square: which side is the length is
     # not told apart, so no known size is lent to their fit.

@@ -189,6 +189,8 @@ class HeightEstimate:
         return self.flat or self._converged
 
     def _settle(self) -> None:
+        """Whether the height has converged after this view (see converged): a second, wider limit
+        once it has, so that views widening it a little do not flip it."""
         shape = self.shape()
         if shape is None or self._refine_views < self._cfg.height_converged_views:
             self._converged = False
@@ -237,7 +239,8 @@ class HeightEstimate:
         # A view no box of a height explains counts against it as much as a view can.
         scatter[~np.array(self._fitted)] = self._cfg.height_vote_view_cap
         # So does one its box explains only with a side face as bright as its top (or as dark as the
-        # belt): the shape of another part (a taller box's bright sides pass for a flat part's top).
+        # belt), however well it fits the edges: that is the shape of another part (a taller box's
+        # bright sides pass for a flat part's top).
         scatter[np.array(self._outside)] = self._cfg.height_vote_view_cap
         return self._cfg.height_vote_cost_weight * excess + np.sum(scatter, axis=(0, 2))
 

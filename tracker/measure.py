@@ -305,23 +305,27 @@ class Measurer:
             # Flat leads the vote: the pose is the plain measurement's (as with no box at all: a
             # cylinder lying down, a bag).
             return None, trials
-        box = next((b for b in boxes if b.height_mm == lead), min(boxes, key=lambda f: f.rms_px))
-        # What its shades tell counts in the vote; the track learns them (from the view that decides it
-        # on) only with learn_shades.
-        return (box if cfg.learn_shades else replace(box, view_shades=None)), trials
+        box = next((b for b in boxes if b.height_mm == lead), None)
+        # Its shades go to the track with learn_shades, which learns them from the view that decides its
+        # vote on (if that is this box's height); a box of another height than the leading one tells none.
+        if box is None or not cfg.learn_shades:
+            box = replace(box or min(boxes, key=lambda f: f.rms_px), view_shades=None)
+        return box, trials
 
     def _trials(self, fit, rect: Rect, windows: EdgeWindows,
                 heights_mm: tuple[float, ...]) -> tuple[list[BoxFit], tuple[HeightTrial, ...]]:
         """A box of each height, its size free: those that fit, and the trials."""
         cfg = self.config
-        tell = cfg.vote_on_shades and self._blur_px == 0
+        # Their shades: for the vote's check, and for the track to learn from the view that decides it.
+        tell = self._blur_px == 0 and (cfg.vote_on_shades or cfg.learn_shades)
         fits = [(h, fit(h, tell_shades=tell and h > 0)) for h in heights_mm]
         boxes = [f for _, f in fits if f is not None]
         if not boxes:
             return [], ()
         # A height no box of explains (worse than box_max_rms_px) votes as if it had just that.
         trials = tuple(HeightTrial(h, rect, cfg.box_max_rms_px, len(windows), fitted=False) if f is None else
-                       HeightTrial(h, f.rect, f.rms_px, f.windows, _size_variances(f), shades=f.view_shades)
+                       HeightTrial(h, f.rect, f.rms_px, f.windows, _size_variances(f),
+                                   shades=f.view_shades if cfg.vote_on_shades else None)
                        for h, f in fits)
         return boxes, trials
 

@@ -112,7 +112,7 @@ class Track:
             leading = self.height.leading_mm, self.height.flat, self.height.voting
             self.height.add(m, *m.seen_at_mm)
             r = self.height.rect(m)
-            self._learn_shades(m, cfg)
+            self._learn_shades(m, cfg, leading[0])
             if leading != (self.height.leading_mm, self.height.flat, self.height.voting):
                 # Another height leads the vote (or it is decided): the part's footprint is where that
                 # height puts it, and of the size it needs, not the last one's.
@@ -142,15 +142,17 @@ class Track:
         self._normalise()
         self._history.append((self.t_ns, self.kf.x.copy(), self.kf.P.copy()))
 
-    def _learn_shades(self, m: Measurement, cfg: TrackConfig) -> None:
+    def _learn_shades(self, m: Measurement, cfg: TrackConfig, lead_mm: float | None) -> None:
         """Add what view ``m`` tells of the part's side shades at its estimated height. None while the
         height is voted on (again), nor for a flat part: the vote's boxes of other heights than the
         part's pass for it with other shades (learnt and lent, a flat part's 5-10 mm boxes took a side
         as bright as the top and led its vote; the shades an 8 mm box's 10 mm boxes learnt held its
-        refinement at 9.2 mm; tracker/shades.py)."""
+        refinement at 9.2 mm; tracker/shades.py). The view that decides the vote tells them only if
+        its box (at ``lead_mm``, the height that led before it) is of the height the vote chose."""
         if self.height.voting or self.height.flat:
             self.shades = None
-        elif m.view_shades is not None:
+        elif m.view_shades is not None and (lead_mm is None or math.isclose(lead_mm, self.height.height_mm,
+                                                                             abs_tol=1e-6)):
             if self.shades is None:
                 self.shades = ShadeEstimate(cfg)
             self.shades.add(m.view_shades)
