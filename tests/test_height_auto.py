@@ -98,16 +98,19 @@ def test_auto_finds_a_flat_part_flat(tilt_deg):
 
 
 def _view(x_mm: float, sizes_mm: dict[float, float], flat_length_mm: float = 80.0,
-          outside_mm: tuple[float, ...] = ()) -> Measurement:
+          outside_mm: tuple[float, ...] = (), rms_px: dict[float, float] | None = None,
+          view_shades: ViewShades | None = None) -> Measurement:
     """A made-up view at x whose box of each height needs the length ``sizes_mm[h]`` (width 50), all
-    fitting its edges alike; those of the heights ``outside_mm`` only with an end face as bright as the
-    top (1.3, to 0.05)."""
+    fitting its edges alike (0.05 px, or as ``rms_px`` says); those of the heights ``outside_mm`` only
+    with an end face as bright as the top (1.3, to 0.05). ``view_shades``: what its pose's box tells
+    of its shades."""
     bright = ViewShades((1.3, 0.5), (0.05**2, math.inf), (True, False))
-    trials = tuple(HeightTrial(h, Rect(x_mm, 0.0, 0.0, length, 50.0), 0.05, 200, (0.01, 0.01),
+    rms_px = rms_px or {}
+    trials = tuple(HeightTrial(h, Rect(x_mm, 0.0, 0.0, length, 50.0), rms_px.get(h, 0.05), 200, (0.01, 0.01),
                                shades=bright if h in outside_mm else None)
                    for h, length in sizes_mm.items())
     return Measurement(Rect(x_mm, 0.0, 0.0, flat_length_mm, 50.0), False, (0, 0, 1, 1), (0.0, 0.0), 40,
-                       flat_rect=Rect(x_mm, 0.0, 0.0, flat_length_mm, 50.0), trials=trials)
+                       flat_rect=Rect(x_mm, 0.0, 0.0, flat_length_mm, 50.0), trials=trials, view_shades=view_shades)
 
 
 def _sizes(x_mm: float, true_mm: float) -> dict[float, float]:

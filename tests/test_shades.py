@@ -9,12 +9,11 @@ import numpy as np
 import pytest
 from conftest import rendered
 from test_height_auto import _auto
+from test_height_auto import _view as _made_up_view
 from test_heights import _box_scene
 
 from tracker.boxfit import ViewShades
 from tracker.config import MeasureConfig, TrackConfig, TrackerConfig
-from tracker.geometry import Rect
-from tracker.height import HeightTrial
 from tracker.measure import KnownPart, Measurement
 from tracker.pipeline import Pipeline
 from tracker.shades import ShadeEstimate
@@ -145,11 +144,7 @@ def _vote_view(x_mm: float, rms_px: dict[float, float], shades: ViewShades | Non
     of 0 and 20 mm neither agree nor fit as well), each as well as ``rms_px`` says where it says; its
     pose is the 10 mm box's, which tells ``shades``."""
     sizes = {0.0: 86.0 + x_mm / 10.0, 5.0: 82.0, 10.0: 80.0, 20.0: 74.0 - x_mm / 10.0}
-    rms_px = {0.0: 0.06, 5.0: 0.05, 10.0: 0.05, 20.0: 0.06} | rms_px
-    trials = tuple(HeightTrial(h, Rect(x_mm, 0.0, 0.0, length, 50.0), rms_px[h], 200, (0.01, 0.01))
-                   for h, length in sizes.items())
-    return Measurement(Rect(x_mm, 0.0, 0.0, 80.0, 50.0), False, (0, 0, 1, 1), (0.0, 0.0), 40,
-                       flat_rect=Rect(x_mm, 0.0, 0.0, 86.0, 50.0), trials=trials, view_shades=shades)
+    return _made_up_view(x_mm, sizes, flat_length_mm=86.0, rms_px={0.0: 0.06, 20.0: 0.06} | rms_px, view_shades=shades)
 
 
 def test_the_view_that_decides_a_vote_for_another_height_than_its_box_tells_no_shades():

@@ -245,14 +245,14 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     if tell_shades and params[_H] > 0 and len(r) > len(free) + 2:
         kept = windows if isinstance(keep, slice) else windows.subset(keep)
         polygons, kinds = camera.faces(params)
-        predicted, solved = _shaded(lengths_in_faces(kept, polygons), kinds, kept.covered_px, None, shade_start,
-                                    shade_hold)
+        # The shades the fit's last sums were predicted with (``r`` its residuals there).
+        solved = _shaded(lengths_in_faces(kept, polygons), kinds, kept.covered_px, None, shade_start, shade_hold)[1]
         # The sums along one side may share an error of sum_sigma_px (the belt's level under them, the
         # blur): a face w px wide tells its shade no better than sum_sigma_px / w.
         widths = _side_widths_px(polygons, kinds, px_per_norm)
         floor = (sum_sigma_px / np.maximum(widths, 1e-9)) ** 2
-        shades = _view_shades(lambda p, s: sums(p, keep, s), params, solved[0], kept.covered_px - predicted[0],
-                              free, floor, widths >= _OUTSIDE_MIN_WIDTH_PX)
+        shades = _view_shades(lambda p, s: sums(p, keep, s), params, solved[0], r, free, floor,
+                              widths >= _OUTSIDE_MIN_WIDTH_PX)
     x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0
@@ -288,9 +288,7 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
     ``wide``: whether each is wide enough to tell a shade no side has (ViewShades.outside). A kind of
     face the view does not show, or whose step leaves _SHADE_RANGE or reaches _SHADE_TOLD_MAX, gets an
     infinite variance."""
-    steps = np.zeros((len(free), len(params)))
-    steps[np.arange(len(free)), free] = _STEP[free]
-    box_jac = (residuals(params + steps, shades) - r) / _STEP[free][:, None]
+    box_jac = (residuals(params + _difference_steps(free, len(params)), shades) - r) / _STEP[free][:, None]
     shade_jac = np.stack([(residuals(params[None], shades + d)[0] - r) / _SHADE_STEP for d in np.eye(2) * _SHADE_STEP])
     jac = np.vstack([box_jac, shade_jac]).T
     normal, grad = jac.T @ jac, jac.T @ r
@@ -373,6 +371,14 @@ def _robust(residuals, params: np.ndarray, free: list[int], iterations: int, pri
     return (*_least_squares(lambda p: residuals(p, keep), params, free, iterations, prior, converged), keep)
 
 
+def _difference_steps(free: list[int], n_params: int) -> np.ndarray:
+    """One box per ``free`` parameter, each that parameter's difference step (_STEP) and no other:
+    added to a box's parameters, the boxes a forward-difference Jacobian is taken at."""
+    steps = np.zeros((len(free), n_params))
+    steps[np.arange(len(free)), free] = _STEP[free]
+    return steps
+
+
 def _least_squares(residuals, params: np.ndarray, free: list[int], iterations: int, prior: tuple | None = None,
                    converged: float = CONVERGED_STEPS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Levenberg-Marquardt from ``params`` over the ``free`` ones: (params, residuals, Jacobian of the
@@ -383,8 +389,7 @@ def _least_squares(residuals, params: np.ndarray, free: list[int], iterations: i
     prior_jac = np.zeros((len(index), len(free)))
     for row, i in enumerate(index):
         prior_jac[row, free.index(i)] = weight[row]
-    steps = np.zeros((len(free), len(params)))
-    steps[np.arange(len(free)), free] = _STEP[free]
+    steps = _difference_steps(free, len(params))
 
     def cost_of(r: np.ndarray, p: np.ndarray) -> float:
         return float(np.sum(r**2) + np.sum((weight * (p[index] - value)) ** 2))

@@ -143,7 +143,7 @@ class MeasureConfig:
     # --part-height auto: a part's track learns its side shades from its views once its height is voted
     # on, and lends them to its fits where a side face is a sliver (tracker/shades.py): one view of a
     # sliver settles its shade wherever its fit starts, and its height comes out off (the tests' 10 mm
-    # box at 10 deg: 1.4 mm once converged without, 0.48 with).
+    # box at 10 deg: 1.4 mm once converged without, 0.13 with).
     learn_shades: bool = True
     # --part-height auto: a vote's view whose box of a height explains it only with a side face as
     # bright as the top (or darker than the belt's level allows) counts against that height as if its

@@ -70,7 +70,8 @@ class Measurement:
     # views a height is estimated from are told apart by it; unlike the poses it stays in the world
     # frame when a moving belt's parts are tracked in the belt's own (see moved).
     view_mm: tuple[float, float] | None = None
-    # A refined part's pose fit: what this view alone tells of its side faces' shades (tracker/shades.py).
+    # What this view alone tells of its box's side shades (tracker/shades.py): a refined part's pose
+    # fit, or the box at the height leading its vote.
     view_shades: ViewShades | None = None
 
     @property
@@ -306,11 +307,12 @@ class Measurer:
             # cylinder lying down, a bag).
             return None, trials
         box = next((b for b in boxes if b.height_mm == lead), None)
+        if box is None:
+            # No box of the leading height: the best one's pose, whose shades are another height's.
+            return replace(min(boxes, key=lambda f: f.rms_px), view_shades=None), trials
         # Its shades go to the track with learn_shades, which learns them from the view that decides its
-        # vote on (if that is this box's height); a box of another height than the leading one tells none.
-        if box is None or not cfg.learn_shades:
-            box = replace(box or min(boxes, key=lambda f: f.rms_px), view_shades=None)
-        return box, trials
+        # vote on (if the vote chooses this box's height).
+        return (box if cfg.learn_shades else replace(box, view_shades=None)), trials
 
     def _trials(self, fit, rect: Rect, windows: EdgeWindows,
                 heights_mm: tuple[float, ...]) -> tuple[list[BoxFit], tuple[HeightTrial, ...]]:
