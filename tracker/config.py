@@ -218,6 +218,10 @@ class TrackConfig:
     height_vote_margin: float = 25.0
     height_vote_min_views: int = 3
     height_vote_views: int = 8
+    # A part's height need not be one of measure.height_starts_mm: between the best height's neighbours
+    # (halfway to each) the vote's sizes are interpolated at steps of this (mm), and the height where
+    # they agree best leads (see HeightEstimate._between).
+    height_vote_resolution_mm: float = 0.1
     # The refinement starts from the vote's size held this tightly (1 sigma, mm: the vote's boxes agree
     # on it, while one view's fit with the height free slides along its valley), its height within this
     # fraction of the span of the voted height's neighbours (1 sigma). No view counts surer than
@@ -225,6 +229,12 @@ class TrackConfig:
     start_shape_sigma_mm: float = 0.3
     start_height_span_fraction: float = 0.125
     view_height_sigma_mm: float = 0.5
+    # A view that tells its own height (its size marginalised out) less surely than this (1 sigma, mm)
+    # is left out: it shows hardly any side face (near the middle of the view, a thin part), so it
+    # tells the height only from the part's apparent size, which an edge bias of a twentieth of a pixel
+    # moves by a millimetre alike in every such view (the tests' 5 mm box at 10 deg: its views near the
+    # middle claimed 6-15 mm and pulled it 0.5 mm up).
+    view_height_told_sigma_mm: float = 0.5
     # A view whose own shape disagrees with the estimate by more than this chi-square (3 degrees of
     # freedom) is left out; this many in a row, and the height is voted again.
     view_gate_chi2: float = 25.0

@@ -14,17 +14,23 @@ size. The estimate has two stages.
    height (weighted ``track.height_vote_cost_weight``: a box fit stopped short costs as much as a wrong
    height). The best height wins once it leads the next by ``track.height_vote_margin`` (from
    ``track.height_vote_min_views`` views on), or after ``track.height_vote_views`` views. A winner of 0
-   makes the part flat: from then on it is measured as flat, exactly as a flat part always was.
-   Meanwhile a view's pose is its fit at the height leading the vote.
+   makes the part flat: from then on it is measured as flat, exactly as a flat part always was. A
+   part's height is rarely one of those tried: between the best height's neighbours (halfway to
+   each) every view's sizes are interpolated, and the height where they agree best leads the vote
+   (to ``track.height_vote_resolution_mm``), and starts the refinement if its height wins. Meanwhile
+   a view's pose is its box at the leading height.
 2. **Refine.** Otherwise each later view is measured as a box of the estimated height, its size lent
    (its pose), and fitted once more with the height free, the part's shape lent: what that view tells
-   of (length, width, height) on its own (``boxfit.view_information``) adds to the estimate, so views
-   from different places decide together what none decides alone. A view that disagrees with the
-   estimate beyond ``track.view_gate_chi2`` is left out (a hand over the part, a fit gone astray); one
-   that keeps disagreeing for ``track.view_gate_frames`` views starts the vote again. The height has
-   converged once its uncertainty is below ``track.height_converged_sigma_mm`` over
-   ``track.height_converged_views`` views, and stays so until it exceeds
-   ``track.height_unconverged_sigma_mm`` (or the vote is held again); from then on every
+   of (length, width, height) on its own (``boxfit.view_information``) adds to the estimate. A view
+   that tells the height alone (its size marginalised out) less surely than
+   ``track.view_height_told_sigma_mm`` is left out: it shows hardly any side face, and tells the height
+   only from the part's apparent size, which the same small bias of the edges moves by millimetres in
+   every such view. A view that disagrees with the estimate beyond ``track.view_gate_chi2`` is left
+   out too (a hand over the part, a fit gone astray); one that keeps disagreeing for
+   ``track.view_gate_frames`` views starts the vote again (meanwhile the height told is the one voted
+   on again). The height has converged once its uncertainty is below
+   ``track.height_converged_sigma_mm`` over ``track.height_converged_views`` views, and stays so until
+   it exceeds ``track.height_unconverged_sigma_mm`` (or the vote is held again); from then on every
    ``track.height_refine_every``-th view still tells its own.
 """
 
@@ -37,7 +43,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from tracker.config import TrackConfig
-from tracker.geometry import Rect
+from tracker.geometry import Rect, wrap_angle_deg
 
 # A view's disagreement with the estimate is a chi-square of this many degrees of freedom (length,
 # width, height), whose expectation this is.
@@ -87,6 +93,9 @@ class HeightEstimate:
         self._cfg = cfg
         # No view is surer than the model is right: each counts with at least this uncertainty (mm^2).
         self._view_floor_mm2 = np.diag([cfg.size_sigma_mm**2] * 2 + [cfg.view_height_sigma_mm**2])
+        # The height told until a view leads the vote: 0 for a new part; one voted on again keeps the
+        # estimate its views disagreed with (not 0: a jump of the whole height for a frame).
+        self._held_mm = 0.0
         self._reset()
 
     def _reset(self) -> None:
@@ -99,6 +108,7 @@ class HeightEstimate:
         self._fitted: list[np.ndarray] = []  # (K,) whether each height's box explained the view
         self._outside: list[np.ndarray] = []  # (K,) whether it did only with a shade no side has
         self._last_vote_mm: np.ndarray | None = None  # where the part was at the last vote
+        self._lead: tuple[float, np.ndarray] | None = None  # the leading height and its size (see _between)
         # The refinement: the information on (length, width, height) and its vector.
         self._info: np.ndarray | None = None
         self._vec = np.zeros(3)
@@ -141,12 +151,13 @@ class HeightEstimate:
 
     @property
     def leading_mm(self) -> float | None:
-        """The height the vote puts first so far (None before any view; 0 for a flat part)."""
+        """The height the vote puts first so far (None before any view; 0 for a flat part): near the best
+        scoring height tried, where the views' sizes agree best (see _between)."""
         if self.flat:
             return 0.0
-        if not self._excess or not self.voting:
+        if self._lead is None or not self.voting:
             return None
-        return self.heights_mm[int(np.argmin(self._scores()))]
+        return self._lead[0]
 
     def shape(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The refined (length, width, height) mm and their covariance (mm^2), widened by how much more
@@ -175,11 +186,13 @@ class HeightEstimate:
 
     @property
     def height_mm(self) -> float:
-        """The height as estimated so far (0 before any view, and for a flat part)."""
+        """The height as estimated so far (0 before any view, and for a flat part; voted on again, the
+        estimate voted on until a view leads)."""
         shape = self.shape()
         if shape is not None:
             return max(float(shape[0][2]), 0.0)
-        return self.leading_mm or 0.0
+        lead = self.leading_mm
+        return self._held_mm if lead is None else lead
 
     @property
     def converged(self) -> bool:
@@ -204,8 +217,8 @@ class HeightEstimate:
         lead = self.leading_mm
         if lead == 0.0:
             return m.flat_rect or m.rect
-        if self.voting:
-            return next((t.rect for t in m.trials if t.height_mm == lead), m.rect)
+        if self.voting and m.trials:
+            return _rect_at(m.trials, lead) or m.rect
         return m.rect
 
     def _vote(self, trials: tuple[HeightTrial, ...], x_mm: float, y_mm: float) -> None:
@@ -226,23 +239,60 @@ class HeightEstimate:
         self._sizes.append(np.array([(t.rect.length_mm, t.rect.width_mm) for t in trials]))
         # Their variances: the view's own, and no less than the floor.
         self._size_vars.append(np.array([t.size_var_mm2 for t in trials]) + self._cfg.height_vote_size_sigma_mm**2)
-        scores, votes = np.sort(self._scores()), len(self._excess)
+        scores = self._scores()
+        self._lead = self._between(int(np.argmin(scores)))
+        ranked, votes = np.sort(scores), len(self._excess)
         if votes >= self._cfg.height_vote_views or (
-                votes >= self._cfg.height_vote_min_views and scores[1] - scores[0] >= self._cfg.height_vote_margin):
+                votes >= self._cfg.height_vote_min_views and ranked[1] - ranked[0] >= self._cfg.height_vote_margin):
             self._decide()
 
     def _scores(self) -> np.ndarray:
         """Each height's score (lower is better), in units of a chi-square."""
-        excess = np.sum(self._excess, axis=0)
-        sizes, weights, mean = self._sizes_weighed()
-        scatter = np.minimum((sizes - mean) ** 2 * weights, self._cfg.height_vote_view_cap)
-        # A view no box of a height explains counts against it as much as a view can.
-        scatter[~np.array(self._fitted)] = self._cfg.height_vote_view_cap
-        # So does one its box explains only with a side face as bright as its top (or as dark as the
-        # belt), however well it fits the edges: that is the shape of another part (a taller box's
-        # bright sides pass for a flat part's top).
-        scatter[np.array(self._outside)] = self._cfg.height_vote_view_cap
-        return self._cfg.height_vote_cost_weight * excess + np.sum(scatter, axis=(0, 2))
+        sizes, weights, _ = self._sizes_weighed()
+        return self._scored(sizes, weights, np.array(self._excess), self._against())
+
+    def _against(self) -> np.ndarray:
+        """Whether each view counts against each height as much as a view can (views, K): no box of that
+        height explains the view, or one does only with a side face as bright as its top (or as dark as
+        the belt), however well it fits the edges: that is the shape of another part (a taller box's
+        bright sides pass for a flat part's top)."""
+        return ~np.array(self._fitted) | np.array(self._outside)
+
+    def _scored(self, sizes: np.ndarray, weights: np.ndarray, excess: np.ndarray, against: np.ndarray) -> np.ndarray:
+        """The score of each height (or height between them) from its views' sizes and their weights
+        (views, K, 2), excess costs (views, K) and how much each view counts against it (views, K; 1:
+        as much as a view can, see _against)."""
+        mean = np.sum(sizes * weights, axis=0) / np.maximum(np.sum(weights, axis=0), 1e-12)
+        cap = self._cfg.height_vote_view_cap
+        scatter = np.minimum((sizes - mean) ** 2 * weights, cap)
+        scatter = scatter + (cap - scatter) * against[..., None]
+        return self._cfg.height_vote_cost_weight * np.sum(excess, axis=0) + np.sum(scatter, axis=(0, 2))
+
+    def _between(self, k: int) -> tuple[float, np.ndarray]:
+        """The height near the ``k``-th tried (from halfway to its lower neighbour to halfway to its
+        upper, at steps of track.height_vote_resolution_mm) whose sizes the views agree on best, and
+        that size (length, width). Each view's sizes and their variances are interpolated linearly
+        between the heights whose boxes explain it, its excess cost and whether it counts against a
+        height between all, and scored as the vote scores the heights tried. Flat stays 0: a flat
+        part is measured as flat, not as a box a fraction of a mm tall."""
+        heights = np.array(self.heights_mm)
+        if heights[k] == 0:
+            return 0.0, self._sizes_weighed()[2][k]
+        lo = 0.5 * (heights[max(k - 1, 0)] + heights[k])
+        hi = 0.5 * (heights[min(k + 1, len(heights) - 1)] + heights[k])
+        at = np.linspace(lo, hi, max(round((hi - lo) / self._cfg.height_vote_resolution_mm), 1) + 1)
+        sizes, variances, fitted = np.array(self._sizes), np.array(self._size_vars), np.array(self._fitted)
+        sizes_at, weights_at = np.zeros((len(sizes), len(at), 2)), np.zeros((len(sizes), len(at), 2))
+        for v, f in enumerate(fitted):
+            if f.any():  # else it weighs nothing: no box explains it
+                for side in range(2):
+                    sizes_at[v, :, side] = np.interp(at, heights[f], sizes[v, f, side])
+                    weights_at[v, :, side] = 1.0 / np.interp(at, heights[f], variances[v, f, side])
+        excess_at = np.array([np.interp(at, heights, e) for e in self._excess])
+        against_at = np.array([np.interp(at, heights, a) for a in self._against().astype(float)])
+        j = int(np.argmin(self._scored(sizes_at, weights_at, excess_at, against_at)))
+        weights = np.maximum(np.sum(weights_at[:, j], axis=0), 1e-12)
+        return float(at[j]), np.sum(sizes_at[:, j] * weights_at[:, j], axis=0) / weights
 
     def _sizes_weighed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The vote's sizes (views, K, 2), their weights (1 / variance) and each height's weighted mean (K, 2)."""
@@ -257,18 +307,21 @@ class HeightEstimate:
             return
         if not np.any(np.array(self._fitted)[:, k]):
             return  # no box of the winning height explained any view: no size to start from; vote on
-        # The refinement starts from the vote: the size its height needed, held start_shape_sigma_mm;
-        # the height held a fraction (track.start_height_span_fraction) of its neighbours' span.
-        size = self._sizes_weighed()[2][k]
+        # The refinement starts from the vote: the leading height and the size it needs, held
+        # start_shape_sigma_mm; the height held a fraction (track.start_height_span_fraction) of the
+        # span of the winner's neighbours.
+        height, size = self._lead
         span = float(heights[min(k + 1, len(heights) - 1)] - heights[max(k - 1, 0)])
         start = self._cfg.start_shape_sigma_mm
         sigma = np.array([start, start, max(span * self._cfg.start_height_span_fraction, start)])
         self._info = np.diag(1.0 / sigma**2)
-        self._vec = self._info @ np.array([*size, heights[k]])
+        self._vec = self._info @ np.array([*size, height])
 
     def _refine(self, info: np.ndarray, vec: np.ndarray) -> None:
         if not (np.isfinite(info).all() and np.isfinite(vec).all()):
             return
+        if not _height_information(info) >= self._cfg.view_height_told_sigma_mm**-2:
+            return  # it tells its height from its apparent size alone (track.view_height_told_sigma_mm)
         # The view's uncertainty widened by the floor: (I + info . floor)^-1 scales both parts alike.
         damp = np.linalg.inv(np.eye(3) + info @ self._view_floor_mm2)
         info, vec = 0.5 * (damp @ info + (damp @ info).T), damp @ vec
@@ -283,9 +336,44 @@ class HeightEstimate:
         if chi2 > self._cfg.view_gate_chi2:
             self._disagreeing += 1
             if self._disagreeing >= self._cfg.view_gate_frames:
+                held = self.height_mm
                 self._reset()  # the estimate itself is wrong: vote again
+                self._held_mm = held
             return
         self._disagreeing = 0
         self._info = self._info + info
         self._vec = self._vec + vec
         self._refine_views += 1
+
+
+def _height_information(info: np.ndarray) -> float:
+    """What a view's information on (length, width, height) tells of the height alone, its size
+    marginalised out (a Schur complement; 1/mm^2, 0 or less: nothing)."""
+    size, cross = info[:2, :2], info[:2, 2]
+    with np.errstate(all="ignore"):
+        return float(info[2, 2] - cross @ np.linalg.lstsq(size, cross, rcond=None)[0])
+
+
+def _rect_at(trials: tuple[HeightTrial, ...], height_mm: float) -> Rect | None:
+    """A view's pose as a box of ``height_mm``: its trial of that height, or interpolated between those of
+    the nearest heights below and above whose boxes explain it (a box's pose moves smoothly with its
+    height); None where there are no such."""
+    fitted = sorted((t for t in trials if t.fitted), key=lambda t: t.height_mm)
+    same = [t for t in fitted if t.height_mm == height_mm]
+    if same:
+        return same[0].rect
+    below = [t for t in fitted if t.height_mm < height_mm]
+    above = [t for t in fitted if t.height_mm > height_mm]
+    if not below or not above:
+        return None
+    a, b = below[-1], above[0]
+    turn = wrap_angle_deg(b.rect.angle_deg - a.rect.angle_deg)
+    if abs(turn) > 45.0:
+        return None  # a near-square part whose longer side is another in each: no pose between
+    f = (height_mm - a.height_mm) / (b.height_mm - a.height_mm)
+
+    def between(name: str) -> float:
+        return getattr(a.rect, name) + f * (getattr(b.rect, name) - getattr(a.rect, name))
+
+    return Rect(between("x_mm"), between("y_mm"), wrap_angle_deg(a.rect.angle_deg + f * turn),
+                between("length_mm"), between("width_mm"))

@@ -307,6 +307,9 @@ class Measurer:
             # cylinder lying down, a bag).
             return None, trials
         box = next((b for b in boxes if b.height_mm == lead), None)
+        if box is None and lead is not None:
+            # The leading height lies between those tried: its own box (whose shades the track may learn).
+            box = fit(lead, tell_shades=cfg.learn_shades and self._blur_px == 0)
         if box is None:
             # No box of the leading height: the best one's pose, whose shades are another height's.
             return replace(min(boxes, key=lambda f: f.rms_px), view_shades=None), trials

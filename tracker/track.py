@@ -151,8 +151,8 @@ class Track:
         its box (at ``lead_mm``, the height that led before it) is of the height the vote chose."""
         if self.height.voting or self.height.flat:
             self.shades = None
-        elif m.view_shades is not None and (lead_mm is None or math.isclose(lead_mm, self.height.height_mm,
-                                                                             abs_tol=1e-6)):
+        elif m.view_shades is not None and (lead_mm is None
+                                            or abs(lead_mm - self.height.height_mm) <= cfg.view_height_sigma_mm):
             if self.shades is None:
                 self.shades = ShadeEstimate(cfg)
             self.shades.add(m.view_shades)
