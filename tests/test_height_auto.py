@@ -2,7 +2,7 @@
 (tracker/height.py), against exact truth on rendered boxes; and the vote itself on made-up views.
 
 Measured on these scenes (480x360, 80x50 mm parts crossing the view while turning): once converged,
-the height within 0.04-0.30 mm on average (0.47 at worst) and the centroid within 0.02-0.13 mm for
+the height within 0.03-0.14 mm on average (0.36 at worst) and the centroid within 0.02-0.10 mm for
 the cells tested here; flat parts flat in every converged frame. The cell not tested here misses the
 issue's bounds (the README says by how much): 5 mm straight down.
 """
