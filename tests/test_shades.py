@@ -164,3 +164,25 @@ def test_the_view_that_decides_a_vote_for_another_height_than_its_box_tells_no_s
         assert not track.height.voting
         assert track.height.height_mm == pytest.approx(10.0 if learnt else 5.0)
         assert (track.shades is not None) == learnt, last_rms
+
+
+def test_the_view_that_decides_a_vote_tells_its_shades_if_its_box_is_near_the_height_voted():
+    """The vote's lead moves by tenths of a mm with each view (it lies between the heights tried): the
+    deciding view's box, at the height that led before it, tells its shades if that is within
+    track.view_height_sigma_mm of the height voted, and not beyond. Here two views agree at 10.2 mm
+    and the third, which decides the vote, moves it to 10.5 mm (learnt) or 11.3 mm (not)."""
+    cfg = TrackConfig()
+    told = ViewShades((0.7, 0.5), (0.05**2, 0.05**2))
+
+    def view(k: int, height_mm: float) -> Measurement:
+        x = k * cfg.height_vote_step_mm
+        sizes = {h: 80.0 + (height_mm - h) * (0.5 + x / 400.0) for h in (0.0, 5.0, 10.0, 20.0, 40.0)}
+        return _made_up_view(x, sizes, view_shades=told)
+
+    for last_mm, voted_mm, learnt in ((10.3, 10.5, True), (10.5, 11.3, False)):
+        track = Track(1, view(0, 10.2), 0, cfg, estimating_height=True)
+        track.update(view(1, 10.2), cfg)
+        assert track.height.leading_mm == pytest.approx(10.2)
+        track.update(view(2, last_mm), cfg)
+        assert not track.height.voting and track.height.height_mm == pytest.approx(voted_mm)
+        assert (track.shades is not None) == learnt, last_mm

@@ -225,7 +225,9 @@ class TrackConfig:
     # The refinement starts from the vote's size held this tightly (1 sigma, mm: the vote's boxes agree
     # on it, while one view's fit with the height free slides along its valley), its height within this
     # fraction of the span of the voted height's neighbours (1 sigma). No view counts surer than
-    # view_height_sigma_mm (1 sigma; its sizes than size_sigma_mm).
+    # view_height_sigma_mm (1 sigma; its sizes than size_sigma_mm); and the view that decides the vote
+    # tells the track its side shades only if its box is within view_height_sigma_mm of the height
+    # voted (with measure.learn_shades: the shades a box of another height needs are another part's).
     start_shape_sigma_mm: float = 0.3
     start_height_span_fraction: float = 0.125
     view_height_sigma_mm: float = 0.5
@@ -289,6 +291,9 @@ class TrackConfig:
             raise BadInput(f"track.size_scatter_weight: expected a weight in (0, 1], got {self.size_scatter_weight}")
         if self.shade_memory_views < 1:
             raise BadInput(f"track.shade_memory_views: expected at least 1 view, got {self.shade_memory_views}")
+        if self.height_vote_resolution_mm < 0.01:
+            raise BadInput(f"track.height_vote_resolution_mm: expected at least 0.01 mm (a finer step costs time "
+                           f"and tells nothing more), got {self.height_vote_resolution_mm}")
         if self.height_unconverged_sigma_mm < self.height_converged_sigma_mm:
             raise BadInput(f"track.height_unconverged_sigma_mm: expected >= height_converged_sigma_mm "
                            f"({self.height_converged_sigma_mm}), got {self.height_unconverged_sigma_mm}")

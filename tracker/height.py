@@ -212,12 +212,12 @@ class HeightEstimate:
         self._converged = math.sqrt(shape[1][2, 2]) < limit_mm
 
     def rect(self, m: Measurement) -> Rect:
-        """The pose to take from view ``m``: its flat measurement when flat leads (or is decided), its trial
-        at the leading height while voting, else its own."""
+        """The pose to take from view ``m``: its flat measurement when flat leads (or is decided); while
+        voting, on a view that voted its box at the leading height (see _rect_at); else its own."""
         lead = self.leading_mm
         if lead == 0.0:
             return m.flat_rect or m.rect
-        if self.voting and m.trials:
+        if self.voting and m.trials and lead is not None:
             return _rect_at(m.trials, lead) or m.rect
         return m.rect
 
@@ -251,12 +251,17 @@ class HeightEstimate:
         sizes, weights, _ = self._sizes_weighed()
         return self._scored(sizes, weights, np.array(self._excess), self._against())
 
+    def _told(self) -> np.ndarray:
+        """Whether each view's box of each height explains it and tells its size (views, K): a size its view
+        does not tell (an infinite variance) would weigh nothing, and agree with any."""
+        return np.array(self._fitted) & np.all(np.isfinite(np.array(self._size_vars)), axis=2)
+
     def _against(self) -> np.ndarray:
         """Whether each view counts against each height as much as a view can (views, K): no box of that
-        height explains the view, or one does only with a side face as bright as its top (or as dark as
-        the belt), however well it fits the edges: that is the shape of another part (a taller box's
-        bright sides pass for a flat part's top)."""
-        return ~np.array(self._fitted) | np.array(self._outside)
+        height explains the view and tells its size, or one does only with a side face as bright as its
+        top (or as dark as the belt), however well it fits the edges: that is the shape of another part
+        (a taller box's bright sides pass for a flat part's top)."""
+        return ~self._told() | np.array(self._outside)
 
     def _scored(self, sizes: np.ndarray, weights: np.ndarray, excess: np.ndarray, against: np.ndarray) -> np.ndarray:
         """The score of each height (or height between them) from its views' sizes and their weights
@@ -271,28 +276,31 @@ class HeightEstimate:
     def _between(self, k: int) -> tuple[float, np.ndarray]:
         """The height near the ``k``-th tried (from halfway to its lower neighbour to halfway to its
         upper, at steps of track.height_vote_resolution_mm) whose sizes the views agree on best, and
-        that size (length, width). Each view's sizes and their variances are interpolated linearly
-        between the heights whose boxes explain it, its excess cost and whether it counts against a
-        height between all, and scored as the vote scores the heights tried. Flat stays 0: a flat
-        part is measured as flat, not as a box a fraction of a mm tall."""
+        that size (length, width). Each view's sizes and their weights are interpolated linearly
+        between the heights whose boxes explain it and tell its size, its excess cost and whether it
+        counts against a height between all, and scored as the vote scores the heights tried. Flat
+        stays 0: a flat part is measured as flat, not as a box a fraction of a mm tall."""
         heights = np.array(self.heights_mm)
         if heights[k] == 0:
             return 0.0, self._sizes_weighed()[2][k]
         lo = 0.5 * (heights[max(k - 1, 0)] + heights[k])
         hi = 0.5 * (heights[min(k + 1, len(heights) - 1)] + heights[k])
-        at = np.linspace(lo, hi, max(round((hi - lo) / self._cfg.height_vote_resolution_mm), 1) + 1)
-        sizes, variances, fitted = np.array(self._sizes), np.array(self._size_vars), np.array(self._fitted)
+        # The height tried itself among them, whatever the step.
+        at = np.union1d(np.arange(lo, hi, self._cfg.height_vote_resolution_mm), [heights[k], hi])
+        sizes, weights, _ = self._sizes_weighed()
+        told = self._told()
+        if not told.any():
+            return float(heights[k]), self._sizes_weighed()[2][k]
         sizes_at, weights_at = np.zeros((len(sizes), len(at), 2)), np.zeros((len(sizes), len(at), 2))
-        for v, f in enumerate(fitted):
-            if f.any():  # else it weighs nothing: no box explains it
+        for v, f in enumerate(told):
+            if f.any():  # else it weighs nothing
                 for side in range(2):
                     sizes_at[v, :, side] = np.interp(at, heights[f], sizes[v, f, side])
-                    weights_at[v, :, side] = 1.0 / np.interp(at, heights[f], variances[v, f, side])
+                    weights_at[v, :, side] = np.interp(at, heights[f], weights[v, f, side])
         excess_at = np.array([np.interp(at, heights, e) for e in self._excess])
         against_at = np.array([np.interp(at, heights, a) for a in self._against().astype(float)])
         j = int(np.argmin(self._scored(sizes_at, weights_at, excess_at, against_at)))
-        weights = np.maximum(np.sum(weights_at[:, j], axis=0), 1e-12)
-        return float(at[j]), np.sum(sizes_at[:, j] * weights_at[:, j], axis=0) / weights
+        return float(at[j]), np.sum(sizes_at[:, j] * weights_at[:, j], axis=0) / np.sum(weights_at[:, j], axis=0)
 
     def _sizes_weighed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The vote's sizes (views, K, 2), their weights (1 / variance) and each height's weighted mean (K, 2)."""
@@ -305,7 +313,7 @@ class HeightEstimate:
         if heights[k] == 0:
             self.flat = True
             return
-        if not np.any(np.array(self._fitted)[:, k]):
+        if not np.any(self._told()[:, k]):
             return  # no box of the winning height explained any view: no size to start from; vote on
         # The refinement starts from the vote: the leading height and the size it needs, held
         # start_shape_sigma_mm; the height held a fraction (track.start_height_span_fraction) of the

@@ -307,14 +307,14 @@ class Measurer:
             # cylinder lying down, a bag).
             return None, trials
         box = next((b for b in boxes if b.height_mm == lead), None)
-        if box is None and lead is not None:
+        if box is None and lead is not None and lead not in cfg.height_starts_mm:
             # The leading height lies between those tried: its own box (whose shades the track may learn).
             box = fit(lead, tell_shades=cfg.learn_shades and self._blur_px == 0)
         if box is None:
             # No box of the leading height: the best one's pose, whose shades are another height's.
             return replace(min(boxes, key=lambda f: f.rms_px), view_shades=None), trials
         # Its shades go to the track with learn_shades, which learns them from the view that decides its
-        # vote on (if the vote chooses this box's height).
+        # vote on (if the vote chooses this box's height, to track.view_height_sigma_mm).
         return (box if cfg.learn_shades else replace(box, view_shades=None)), trials
 
     def _trials(self, fit, rect: Rect, windows: EdgeWindows,

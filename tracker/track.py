@@ -148,7 +148,8 @@ class Track:
         part's pass for it with other shades (learnt and lent, a flat part's 5-10 mm boxes took a side
         as bright as the top and led its vote; the shades an 8 mm box's 10 mm boxes learnt held its
         refinement at 9.2 mm; tracker/shades.py). The view that decides the vote tells them only if
-        its box (at ``lead_mm``, the height that led before it) is of the height the vote chose."""
+        its box (at ``lead_mm``, the height that led before it) is of the height the vote chose, to
+        track.view_height_sigma_mm (the vote's lead moves by a tenth of a mm with each view)."""
         if self.height.voting or self.height.flat:
             self.shades = None
         elif m.view_shades is not None and (lead_mm is None
