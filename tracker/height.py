@@ -276,7 +276,7 @@ class HeightEstimate:
     def _between(self, k: int) -> tuple[float, np.ndarray]:
         """The height near the ``k``-th tried (from halfway to its lower neighbour to halfway to its
         upper, at steps of track.height_vote_resolution_mm) whose sizes the views agree on best, and
-        that size (length, width). Each view's sizes and their weights are interpolated linearly
+        that size (length, width). Each view's sizes and their variances are interpolated linearly
         between the heights whose boxes explain it and tell its size, its excess cost and whether it
         counts against a height between all, and scored as the vote scores the heights tried. Flat
         stays 0: a flat part is measured as flat, not as a box a fraction of a mm tall."""
@@ -287,7 +287,7 @@ class HeightEstimate:
         hi = 0.5 * (heights[min(k + 1, len(heights) - 1)] + heights[k])
         # The height tried itself among them, whatever the step.
         at = np.union1d(np.arange(lo, hi, self._cfg.height_vote_resolution_mm), [heights[k], hi])
-        sizes, weights, _ = self._sizes_weighed()
+        sizes, variances = np.array(self._sizes), np.array(self._size_vars)
         told = self._told()
         if not told.any():
             return float(heights[k]), self._sizes_weighed()[2][k]
@@ -296,7 +296,7 @@ class HeightEstimate:
             if f.any():  # else it weighs nothing
                 for side in range(2):
                     sizes_at[v, :, side] = np.interp(at, heights[f], sizes[v, f, side])
-                    weights_at[v, :, side] = np.interp(at, heights[f], weights[v, f, side])
+                    weights_at[v, :, side] = 1.0 / np.interp(at, heights[f], variances[v, f, side])
         excess_at = np.array([np.interp(at, heights, e) for e in self._excess])
         against_at = np.array([np.interp(at, heights, a) for a in self._against().astype(float)])
         j = int(np.argmin(self._scored(sizes_at, weights_at, excess_at, against_at)))
