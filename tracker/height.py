@@ -23,10 +23,11 @@ size. The estimate has two stages.
    (its pose), and fitted once more with the height free, the part's shape lent: what that view tells
    of (length, width, height) on its own (``boxfit.view_information``) adds to the estimate. A view
    that tells the height alone (its size marginalised out) less surely than
-   ``track.view_height_told_sigma_mm`` is left out: it shows hardly any side face, and tells the height
-   only from the part's apparent size, which the same small bias of the edges moves by millimetres in
-   every such view. A view that disagrees with the estimate beyond ``track.view_gate_chi2`` is left
-   out too (a hand over the part, a fit gone astray); one that keeps disagreeing for
+   ``track.view_height_told_sigma_mm`` adds nothing to it: it shows hardly any side face, and tells the
+   height only from the part's apparent size, which the same small bias of the edges moves by
+   millimetres in every such view (whether it disagrees still counts). A view that disagrees with the
+   estimate beyond ``track.view_gate_chi2`` is left out (a hand over the part, a fit gone astray); one
+   that keeps disagreeing for
    ``track.view_gate_frames`` views starts the vote again (meanwhile the height told is the one voted
    on again). The height has converged once its uncertainty is below
    ``track.height_converged_sigma_mm`` over ``track.height_converged_views`` views, and stays so until
@@ -328,8 +329,9 @@ class HeightEstimate:
     def _refine(self, info: np.ndarray, vec: np.ndarray) -> None:
         if not (np.isfinite(info).all() and np.isfinite(vec).all()):
             return
-        if not _height_information(info) >= self._cfg.view_height_told_sigma_mm**-2:
-            return  # it tells its height from its apparent size alone (track.view_height_told_sigma_mm)
+        # A view that tells its height from its apparent size alone (track.view_height_told_sigma_mm) adds
+        # nothing to the estimate; it still tells whether the estimate is wrong (its size along its valley).
+        weak = not _height_information(info) >= self._cfg.view_height_told_sigma_mm**-2
         # The view's uncertainty widened by the floor: (I + info . floor)^-1 scales both parts alike.
         damp = np.linalg.inv(np.eye(3) + info @ self._view_floor_mm2)
         info, vec = 0.5 * (damp @ info + (damp @ info).T), damp @ vec
@@ -340,7 +342,8 @@ class HeightEstimate:
         # very views that scatter, and a wrong estimate would never be voted on again.
         residual = vec - info @ mean
         chi2 = float(residual @ np.linalg.pinv(info + info @ cov @ info) @ residual)
-        self._chi2s.append(chi2)
+        if not weak:
+            self._chi2s.append(chi2)
         if chi2 > self._cfg.view_gate_chi2:
             self._disagreeing += 1
             if self._disagreeing >= self._cfg.view_gate_frames:
@@ -349,6 +352,8 @@ class HeightEstimate:
                 self._held_mm = held
             return
         self._disagreeing = 0
+        if weak:
+            return
         self._info = self._info + info
         self._vec = self._vec + vec
         self._refine_views += 1
