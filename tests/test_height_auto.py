@@ -240,9 +240,19 @@ def _voted_20_mm(cfg: TrackConfig | None = None) -> tuple[TrackConfig, HeightEst
 
 def _refining_view(height_mm: float) -> Measurement:
     """A refining view that tells an 80x50 mm part of this height, each to 0.01 mm."""
-    info = np.diag([1e4, 1e4, 1e4])
+    return _view_telling(np.diag([1e4, 1e4, 1e4]), np.array([80.0, 50.0, height_mm]))
+
+
+def _view_telling(info: np.ndarray, shape: np.ndarray) -> Measurement:
+    """A refining view whose information ``info`` on (length, width, height) claims ``shape``."""
     return Measurement(Rect(0.0, 0.0, 0.0, 80.0, 50.0), False, (0, 0, 1, 1), (0.0, 0.0), 40,
-                       shape_info=info, shape_vec=info @ np.array([80.0, 50.0, height_mm]))
+                       shape_info=info, shape_vec=info @ shape)
+
+
+# What a view that shows hardly any side face tells: how tall the part looks, length + 0.13 x height
+# (its top nearer the camera looks larger), to 0.01 mm; of the rest next to nothing.
+_SEEN = np.array([1.0, 0.0, 0.13])
+_LOOKS = 1e4 * np.outer(_SEEN, _SEEN) + 1e-2 * np.eye(3)
 
 
 def test_a_refined_height_converges_only_after_enough_views():
@@ -306,18 +316,10 @@ def test_a_view_that_tells_its_height_only_with_its_size_is_left_out():
     cfg, height = _voted_20_mm()
     before = height.shape()[0]
     claim = before + np.array([0.0, 0.0, 1.0])
-    seen = np.array([1.0, 0.0, 0.13])
-    looks = 1e4 * np.outer(seen, seen) + 1e-2 * np.eye(3)
-    sure = np.diag([1e4, 1e4, 1e4])
-
-    def view(info: np.ndarray) -> Measurement:
-        return Measurement(Rect(0.0, 0.0, 0.0, 80.0, 50.0), False, (0, 0, 1, 1), (0.0, 0.0), 40,
-                           shape_info=info, shape_vec=info @ claim)
-
     for _ in range(cfg.height_converged_views):
-        height.add(view(looks), 0.0, 0.0)  # taken, these 5 moved it 0.27 mm (measured)
+        height.add(_view_telling(_LOOKS, claim), 0.0, 0.0)  # taken, these 5 moved it 0.27 mm (measured)
     assert height.shape()[0][2] == before[2]
-    height.add(view(sure), 0.0, 0.0)
+    height.add(_view_telling(np.diag([1e4, 1e4, 1e4]), claim), 0.0, 0.0)
     assert height.shape()[0][2] - before[2] > 0.5
 
 
@@ -327,11 +329,7 @@ def test_views_that_tell_their_height_only_with_their_size_still_say_when_the_es
     start the vote again. (Left out of that too, the tests' 15 mm box at 10 deg, whose first vote
     decided 5 mm, was voted on again only near the middle of the view and never converged.)"""
     cfg, height = _voted_20_mm()
-    seen = np.array([1.0, 0.0, 0.13])
-    looks = 1e4 * np.outer(seen, seen) + 1e-2 * np.eye(3)
-    claim = height.shape()[0] + np.array([2.0, 0.0, 0.0])
-    view = Measurement(Rect(0.0, 0.0, 0.0, 80.0, 50.0), False, (0, 0, 1, 1), (0.0, 0.0), 40,
-                       shape_info=looks, shape_vec=looks @ claim)
+    view = _view_telling(_LOOKS, height.shape()[0] + np.array([2.0, 0.0, 0.0]))
     for _ in range(cfg.view_gate_frames - 1):
         height.add(view, 0.0, 0.0)
         assert not height.voting

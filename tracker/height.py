@@ -27,9 +27,8 @@ size. The estimate has two stages.
    height only from the part's apparent size, which the same small bias of the edges moves by
    millimetres in every such view (whether it disagrees still counts). A view that disagrees with the
    estimate beyond ``track.view_gate_chi2`` is left out (a hand over the part, a fit gone astray); one
-   that keeps disagreeing for
-   ``track.view_gate_frames`` views starts the vote again (meanwhile the height told is the one voted
-   on again). The height has converged once its uncertainty is below
+   that keeps disagreeing for ``track.view_gate_frames`` views starts the vote again (meanwhile the
+   height told is the one voted on again). The height has converged once its uncertainty is below
    ``track.height_converged_sigma_mm`` over ``track.height_converged_views`` views, and stays so until
    it exceeds ``track.height_unconverged_sigma_mm`` (or the vote is held again); from then on every
    ``track.height_refine_every``-th view still tells its own.
