@@ -25,6 +25,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python bench/bench.py
 	$(BIN)/python bench/real_videos.py
+	$(BIN)/python bench/belt_motion.py
 	$(BIN)/python bench/heights.py
 
 # Remakes the bundled demo recording (the same bytes for the same software: no wall-clock time in it).
