@@ -46,14 +46,19 @@ class CentroidMotion:
         return dx / self._scale, dy / self._scale
 
 
-def frames(step_px: float) -> list[np.ndarray]:
+def texture() -> np.ndarray:
+    """A random belt texture (grey levels 40-90, a 1.5 px blur), wider than the region by the travel."""
     rng = np.random.default_rng(4)
     width, height = REGION
-    texture = cv2.GaussianBlur(rng.uniform(40, 90, (height + 120, width + 600)).astype(np.float32), (0, 0), 1.5)
+    return cv2.GaussianBlur(rng.uniform(40, 90, (height + 120, width + 600)).astype(np.float32), (0, 0), 1.5)
+
+
+def frames(belt: np.ndarray, step_px: float) -> list[np.ndarray]:
+    width, height = REGION
     out = []
     for i in range(FRAMES):
-        moved = cv2.warpAffine(texture, np.float32([[1, 0, step_px * i], [0, 1, 0.35 * step_px * i]]),
-                               (texture.shape[1], texture.shape[0]), flags=cv2.INTER_CUBIC)
+        moved = cv2.warpAffine(belt, np.float32([[1, 0, step_px * i], [0, 1, 0.35 * step_px * i]]),
+                               (belt.shape[1], belt.shape[0]), flags=cv2.INTER_CUBIC)
         out.append(np.ascontiguousarray(moved[60:60 + height, 300:300 + width]).astype(np.uint8))
     return out
 
@@ -61,9 +66,9 @@ def frames(step_px: float) -> list[np.ndarray]:
 def measure() -> dict:
     width, height = REGION
     scale = 256 / max(width, height)
-    rows, spent = [], {"phase": 0.0, "centroid": 0.0}
+    rows, spent, belt = [], {"phase": 0.0, "centroid": 0.0}, texture()
     for step in STEPS_PX:
-        images, truth = frames(step), np.array([step, 0.35 * step])
+        images, truth = frames(belt, step), np.array([step, 0.35 * step])
         row = {"step_px": step}
         for name, estimator in (("phase", BeltMotion(np.full((height, width), 255, np.uint8))),
                                 ("centroid", CentroidMotion((round(width * scale), round(height * scale)), scale))):

@@ -110,11 +110,16 @@ def test_pose_stream_and_status_line_carry_the_belt_velocity_only_where_measured
     assert line["belt"] == {"vx_mm_s": -84.1235, "vy_mm_s": 0.5}
 
 
+def _texture(seed: int, shape: tuple[int, int]) -> np.ndarray:
+    """A random belt texture (grey levels 40-90, a 1.5 px blur: fine grain, no two places alike)."""
+    rng = np.random.default_rng(seed)
+    return cv2.GaussianBlur(rng.uniform(40, 90, shape).astype(np.float32), (0, 0), 1.5)
+
+
 def test_textured_model_measures_the_belt_moving_with_its_texture():
     """A random texture slid 3 px per frame along +x: the belt's velocity is read from the images."""
     calib = CameraSpec().calibration()  # 1.25 mm/px at the centre
-    rng = np.random.default_rng(1)
-    texture = cv2.GaussianBlur(rng.uniform(40, 90, (480, 1000)).astype(np.float32), (0, 0), 1.5)
+    texture = _texture(1, (480, 1000))
     pipeline = Pipeline(calib, TrackerConfig(segment=SegmentConfig(model="textured")))
     results = [pipeline.process(i, texture[:, 300 - 3 * i: 940 - 3 * i].astype(np.uint8), round(i * 1e9 / 60))
                for i in range(40)]
@@ -130,8 +135,7 @@ def test_belt_motion_reads_fractions_of_a_pixel_without_bias(step_px):
     """A texture slid by a fraction of a pixel per frame, diagonally: the patch is averaged down to 256 px
     (0.4 of this view), and the shift is still read to a tenth of a pixel (the peak's centroid,
     cv2.phaseCorrelate's, read a 1 px step as 0.6 and 2.5 as 2.3)."""
-    rng = np.random.default_rng(4)
-    texture = cv2.GaussianBlur(rng.uniform(40, 90, (600, 1400)).astype(np.float32), (0, 0), 1.5)
+    texture = _texture(4, (600, 1400))
     motion = BeltMotion(np.full((480, 640), 255, np.uint8))
     step = np.array([step_px, 0.35 * step_px])
     read = []

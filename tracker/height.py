@@ -267,7 +267,7 @@ class HeightEstimate:
         """The score of each height (or height between them) from its views' sizes and their weights
         (views, K, 2), excess costs (views, K) and how much each view counts against it (views, K; 1:
         as much as a view can, see _against)."""
-        mean = np.sum(sizes * weights, axis=0) / np.maximum(np.sum(weights, axis=0), 1e-12)
+        mean = _weighted_mean(sizes, weights)
         cap = self._cfg.height_vote_view_cap
         scatter = np.minimum((sizes - mean) ** 2 * weights, cap)
         scatter = scatter + (cap - scatter) * against[..., None]
@@ -300,12 +300,12 @@ class HeightEstimate:
         excess_at = np.array([np.interp(at, heights, e) for e in self._excess])
         against_at = np.array([np.interp(at, heights, a) for a in self._against().astype(float)])
         j = int(np.argmin(self._scored(sizes_at, weights_at, excess_at, against_at)))
-        return float(at[j]), np.sum(sizes_at[:, j] * weights_at[:, j], axis=0) / np.sum(weights_at[:, j], axis=0)
+        return float(at[j]), _weighted_mean(sizes_at[:, j], weights_at[:, j])
 
     def _sizes_weighed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The vote's sizes (views, K, 2), their weights (1 / variance) and each height's weighted mean (K, 2)."""
         sizes, weights = np.array(self._sizes), 1.0 / np.array(self._size_vars)
-        return sizes, weights, np.sum(sizes * weights, axis=0) / np.maximum(np.sum(weights, axis=0), 1e-12)
+        return sizes, weights, _weighted_mean(sizes, weights)
 
     def _decide(self) -> None:
         heights = np.array(self.heights_mm)
@@ -356,6 +356,11 @@ class HeightEstimate:
         self._info = self._info + info
         self._vec = self._vec + vec
         self._refine_views += 1
+
+
+def _weighted_mean(sizes: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """The views' sizes (views, ...) averaged over the views by their weights (0 where none weighs)."""
+    return np.sum(sizes * weights, axis=0) / np.maximum(np.sum(weights, axis=0), 1e-12)
 
 
 def _height_information(info: np.ndarray) -> float:

@@ -14,8 +14,6 @@ amounts in different OpenCV versions.
 
 from __future__ import annotations
 
-import functools
-
 import cv2
 import numpy as np
 
@@ -47,6 +45,7 @@ class BeltMotion:
         # its own scale.
         self._size = tuple(_smooth_at_most(max(8, round(n * scale))) for n in (x1 - x0, y1 - y0))
         self._scales = (self._size[0] / (x1 - x0), self._size[1] / (y1 - y0))
+        self._window = cv2.createHanningWindow(self._size, cv2.CV_64F)
         self._prev: np.ndarray | None = None
         self._prev_spectrum: np.ndarray | None = None
         self.shift_px = (0.0, 0.0)
@@ -63,8 +62,8 @@ class BeltMotion:
         if prev is None or self.duplicate:
             self._prev_spectrum = None  # that of another patch than the one now kept
             return self.shift_px
-        spectrum = _spectrum(patch)
-        prev_spectrum = self._prev_spectrum if self._prev_spectrum is not None else _spectrum(prev)
+        spectrum = _spectrum(patch, self._window)
+        prev_spectrum = self._prev_spectrum if self._prev_spectrum is not None else _spectrum(prev, self._window)
         self._prev_spectrum = spectrum  # the next frame's previous
         found = phase_shift(prev_spectrum, spectrum, patch.shape)
         if found is not None:
@@ -72,15 +71,11 @@ class BeltMotion:
         return self.shift_px
 
 
-def _spectrum(patch: np.ndarray) -> np.ndarray:
-    """The patch's half spectrum, its mean removed and Hann-windowed (its borders, cut off by the crop,
-    would otherwise correlate with themselves at no shift, and so would its mean through the window)."""
-    return np.fft.rfft2((patch - patch.mean()) * _window(patch.shape))
-
-
-@functools.lru_cache(maxsize=8)
-def _window(shape: tuple[int, int]) -> np.ndarray:
-    return cv2.createHanningWindow((shape[1], shape[0]), cv2.CV_64F)
+def _spectrum(patch: np.ndarray, window: np.ndarray) -> np.ndarray:
+    """The patch's half spectrum, its mean removed and Hann-windowed (``window``, of its shape: its
+    borders, cut off by the crop, would otherwise correlate with themselves at no shift, and so would
+    its mean through the window)."""
+    return np.fft.rfft2((patch - patch.mean()) * window)
 
 
 def phase_shift(before: np.ndarray, after: np.ndarray, shape: tuple[int, int]) -> tuple[float, float] | None:
