@@ -39,14 +39,14 @@ def box_scene(height_mm: float, tilt_deg: float) -> SceneSpec:
     cam = CameraSpec(width=560, height=420, focal_px=470.0, tilt_deg=tilt_deg, yaw_deg=-35.0, height_mm=760.0,
                      principal_offset_px=(-4.0, 3.0))
     part = PartSpec(72, 46, height_mm, -460, 40, -15, 340, -30, omega_deg_s=-16.0, intensity=175)
-    return SceneSpec(cam, (part,), fps=30, n_frames=84, supersample=4, blur_samples=3, belt_level=70.0, seed=7)
+    return SceneSpec(cam, (part,), fps=30, n_frames=84, supersample=8, blur_samples=3, belt_level=70.0, seed=7)
 
 
 def pair_scene() -> SceneSpec:
     cam = CameraSpec(width=560, height=420, focal_px=470.0, tilt_deg=15.0, yaw_deg=-35.0, height_mm=760.0)
     parts = (PartSpec(72, 46, 20.0, -460, 60, -15, 340, -30, omega_deg_s=-16.0, intensity=175),
              PartSpec(60, 40, 8.0, -520, -110, 30, 330, 10, omega_deg_s=12.0, intensity=205))
-    return SceneSpec(cam, parts, fps=30, n_frames=90, supersample=4, blur_samples=3, belt_level=70.0, seed=8)
+    return SceneSpec(cam, parts, fps=30, n_frames=90, supersample=8, blur_samples=3, belt_level=70.0, seed=8)
 
 
 def run(scene: SceneSpec, measure: MeasureConfig, spent: dict | None = None) -> tuple[list[dict], list[dict]]:

@@ -12,6 +12,11 @@ from tracker.synthetic import Renderer, SceneSpec
 
 ROOT = Path(__file__).resolve().parent.parent
 SHARED_DATA = ROOT.parent / "shared" / "data"
+# Sub-pixel samples per side of an edge pixel in the rendered scenes of parts with height. At 4 a side
+# face's rendered area was off by up to 0.07 px of its width over 8 px of its edge, always the same way
+# along an edge at some angles (the pattern repeats in every pixel), which a thin box's height and
+# first sizes read as tenths of a mm; at 8 it is within 0.01 px (tests/test_synthetic.py).
+BOX_SUPERSAMPLE = 8
 
 
 @functools.cache

@@ -16,7 +16,7 @@ from collections import Counter
 
 import numpy as np
 import pytest
-from conftest import rendered, run_pipeline
+from conftest import BOX_SUPERSAMPLE, rendered, run_pipeline
 from test_heights import _box_scene
 from test_textured_knurl import _scene as knurl_scene
 from textured_support import mpeg4_round_trip, textured_run
@@ -63,8 +63,8 @@ def _centroid_mm(o: dict, t: dict) -> float:
 # crossing, 1.16 mm off; then after 17 %, 0.47 mm; 0.14 since views that tell their height only from
 # the part's apparent size are left out, track.view_height_told_sigma_mm). 8 mm straight down is a
 # height the vote does not try (0.36 mm off at worst).
-@pytest.mark.parametrize("height_mm,tilt_deg", [(5, 10), (5, 20), (8, 0), (10, 0), (10, 10), (10, 20), (20, 0),
-                                                (20, 10), (20, 20), (60, 0), (60, 10), (60, 20)])
+@pytest.mark.parametrize("height_mm,tilt_deg", [(5, 0), (5, 10), (5, 20), (8, 0), (10, 0), (10, 10), (10, 20),
+                                                (20, 0), (20, 10), (20, 20), (60, 0), (60, 10), (60, 20)])
 def test_auto_estimates_a_box_height(height_mm, tilt_deg):
     """Converged within the first third of the part's crossing; from then on its height within 0.5 mm
     and its centroid within 0.2 mm mean (the issue's bounds), and within 1 mm mean before."""
@@ -86,7 +86,7 @@ def test_auto_finds_a_flat_part_flat(tilt_deg):
     a 5 mm box look alike from above (measured: decided after 34 % of the crossing; 10 % tilted)."""
     frames = _auto(0, tilt_deg)
     after = [(o, t) for o, t in frames if o["height_converged"]]
-    assert len(after) >= len(frames) / 2, (len(after), len(frames))
+    assert len(after) >= 2 / 3 * len(frames), (len(after), len(frames))
     assert all(o["height_mm"] == 0.0 for o, _ in after)
     assert np.mean([_centroid_mm(o, t) for o, t in after]) <= 0.05
     # Its size too, as flat mode measures it (its edges read against the part's own level, not, as a
@@ -97,6 +97,9 @@ def test_auto_finds_a_flat_part_flat(tilt_deg):
     leading = [max(abs(o["length_mm"] - t["length_mm"]), abs(o["width_mm"] - t["width_mm"])) for o, t in frames
                if not o["height_converged"] and o["height_mm"] == 0.0]
     assert len(leading) >= 3 and np.mean(leading) <= 0.06, leading
+    # Before it is decided, posed at whichever height leads (the issue's bound).
+    before = [_centroid_mm(o, t) for o, t in frames if not o["height_converged"]]
+    assert np.mean(before) <= 1.0, before
 
 
 def _view(x_mm: float, sizes_mm: dict[float, float], flat_length_mm: float = 80.0,
@@ -360,7 +363,7 @@ def test_two_parts_of_different_heights_each_get_their_own():
     cam = CameraSpec(width=480, height=360, focal_px=420.0, tilt_deg=10, yaw_deg=15)
     parts = (PartSpec(80, 50, 8.0, -560, -60, 20, 300, 40, omega_deg_s=20.0, intensity=190),
              PartSpec(70, 45, 25.0, -640, 80, -30, 310, 10, omega_deg_s=-15.0, intensity=215))
-    scene = SceneSpec(cam, parts, fps=30, n_frames=100, supersample=4, blur_samples=3, seed=3)
+    scene = SceneSpec(cam, parts, fps=30, n_frames=100, supersample=BOX_SUPERSAMPLE, blur_samples=3, seed=3)
     poses, truths = run_pipeline(scene, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
     assert len({o["id"] for p in poses for o in p["objects"]}) == 2
     for k in range(2):
@@ -394,7 +397,7 @@ def test_on_a_textured_moving_belt_each_part_keeps_one_track_and_its_height():
     bring this scene's estimate to 20.3 mm."""
     cam = CameraSpec(width=480, height=360, focal_px=420.0, tilt_deg=10, yaw_deg=15)
     part = PartSpec(80, 50, 20.0, -420, -30, 20, 300, 40, omega_deg_s=20.0, intensity=190)
-    scene = SceneSpec(cam, (part,), fps=30, n_frames=90, supersample=4, blur_samples=3, noise_sigma=2.0,
+    scene = SceneSpec(cam, (part,), fps=30, n_frames=90, supersample=BOX_SUPERSAMPLE, blur_samples=3, noise_sigma=2.0,
                       belt_texture=10.0, belt_velocity_mm_s=(300.0, 40.0))
     renderer, frames = rendered(scene)
     images = mpeg4_round_trip([image for image, _ in frames], fps=scene.fps)

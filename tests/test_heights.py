@@ -1,6 +1,6 @@
 """Parts with height, the height given: the footprint's pose from the box's faces (side faces and
 their shades included), against exact truth on rendered boxes. Measured on these scenes: centroid
-mean 0.02-0.11 mm, p95 at most 0.33 mm, angle at most 0.03 deg for 5-60 mm tall boxes seen at
+mean 0.01-0.07 mm, p95 at most 0.17 mm, angle at most 0.02 deg for 5-60 mm tall boxes seen at
 0-20 deg tilt, where the flat assumption is off by 1-16 mm (bench/heights.py measures other scenes)."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import json
 import cv2
 import numpy as np
 import pytest
-from conftest import rendered, run_pipeline
+from conftest import BOX_SUPERSAMPLE, rendered, run_pipeline
 
 from tracker.box import EdgeWindows, lengths_in_faces
 from tracker.boxfit import SizePrior, _best_shades
@@ -26,7 +26,7 @@ def _box_scene(height_mm: float, tilt_deg: float) -> SceneSpec:
     cam = CameraSpec(width=480, height=360, focal_px=420.0, tilt_deg=tilt_deg, yaw_deg=15)
     # Crossing the whole view diagonally while turning, so every side face shows at some point.
     part = PartSpec(80, 50, height_mm, -420, -30, 20, 300, 40, omega_deg_s=20.0, intensity=190)
-    return SceneSpec(cam, (part,), fps=30, n_frames=90, supersample=4, blur_samples=3)
+    return SceneSpec(cam, (part,), fps=30, n_frames=90, supersample=BOX_SUPERSAMPLE, blur_samples=3)
 
 
 def _summary(scene: SceneSpec, height_mm: float) -> dict:
@@ -43,10 +43,11 @@ def test_the_box_faces_give_the_footprint(height_mm, tilt_deg):
     flat, _ = _summary(scene, 0.0)
     # In view at the start (partly), it is measured from its first whole view (reference.py's start-up).
     assert given["missed_frames"] == 0, given
-    # Thin parts' side faces are slivers whose shade trades with their edge: a little less exact, and
-    # their size is learnt over more views (the first few, at the view's edge, leave it open by up to
-    # 0.8 mm: 0.5-0.65 mm off in the first four at 5 mm and 20 deg, frames missed before).
-    bound_mm, p95_mm, size_mm = (0.12, 0.4, 1.0) if height_mm < 20 else (0.05, 0.15, 0.5)
+    # The issue's bounds. Thin parts' side faces are slivers whose shade trades with their edge (the
+    # track learns their shades from the views that show them wider, measure.learn_shades): a little
+    # less exact, and their size is learnt over more views (the first few, at the view's edge, leave it
+    # open by up to 0.6 mm).
+    bound_mm, p95_mm, size_mm = (0.1, 0.3, 1.0) if height_mm < 20 else (0.05, 0.15, 0.5)
     assert given["centroid_mean_mm"] <= bound_mm and given["centroid_p95_mm"] <= p95_mm, given
     assert given["angle_mean_deg"] <= 0.05, given
     assert given["length_max_mm"] <= size_mm and given["width_max_mm"] <= size_mm, given
@@ -58,7 +59,9 @@ def test_the_box_faces_give_the_footprint(height_mm, tilt_deg):
 def test_a_blurred_image_is_measured_with_its_blur():
     """A camera's blur (here a Gaussian of 1 px on every frame) spreads a thin side face into the
     pixels next to its edge; told of it (measure.edge_blur_px), the fit models the mix. Measured:
-    0.08 mm centroid mean against 0.21 mm with the blur left out."""
+    0.11 mm centroid mean, sizes within 0.55 mm, against 0.23 mm and 3.2 mm with the blur left out
+    (0.08 mm and 0.40 when the scene was rendered with 4x4 samples per edge pixel, whose errors
+    happened to help)."""
     scene = _box_scene(10, 10)
     _, frames = rendered(scene)
     blurred = [cv2.GaussianBlur(image, (0, 0), 1.0) for image, _ in frames]
@@ -71,8 +74,9 @@ def test_a_blurred_image_is_measured_with_its_blur():
         return evaluate(poses, truths, skip_first=2).summary()
 
     told, untold = summary(1.0), summary(0.0)
-    assert told["centroid_mean_mm"] <= 0.12 and told["width_max_mm"] <= 0.5, told
+    assert told["centroid_mean_mm"] <= 0.12 and max(told["length_max_mm"], told["width_max_mm"]) <= 0.6, told
     assert untold["centroid_mean_mm"] > 1.5 * told["centroid_mean_mm"], (told, untold)
+    assert untold["width_max_mm"] > 3 * told["width_max_mm"], (told, untold)
 
 
 def test_window_lengths_in_a_face_are_exact():
@@ -126,7 +130,7 @@ def test_a_bag_is_no_box_but_its_pose_stays_sane():
     either way, never a wild pose."""
     cam = CameraSpec(width=480, height=360, focal_px=420.0, tilt_deg=20, yaw_deg=15)
     part = PartSpec(90, 60, 30, -560, -80, 20, 300, 40, omega_deg_s=20.0, intensity=190, shape="bag")
-    scene = SceneSpec(cam, (part,), fps=30, n_frames=100, supersample=4, blur_samples=3)
+    scene = SceneSpec(cam, (part,), fps=30, n_frames=100, supersample=BOX_SUPERSAMPLE, blur_samples=3)
     half, poses = _summary(scene, 15.0)
     full, _ = _summary(scene, 30.0)
     flat, _ = _summary(scene, 0.0)
@@ -144,7 +148,7 @@ def test_a_cylinder_lying_down_is_no_box_but_its_pose_stays_sane():
     cam = CameraSpec(width=480, height=360, focal_px=420.0, tilt_deg=20, yaw_deg=15)
     # It comes into view from outside (no ghost of a start position in the first frame).
     part = PartSpec(90, 40, 40, -560, -80, 20, 300, 40, omega_deg_s=20.0, intensity=190, shape="cylinder")
-    scene = SceneSpec(cam, (part,), fps=30, n_frames=100, supersample=4, blur_samples=3)
+    scene = SceneSpec(cam, (part,), fps=30, n_frames=100, supersample=BOX_SUPERSAMPLE, blur_samples=3)
     given, poses = _summary(scene, 40.0)
     flat, _ = _summary(scene, 0.0)
     assert given["missed_frames"] <= 3, given

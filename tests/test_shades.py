@@ -14,6 +14,7 @@ from test_heights import _box_scene
 
 from tracker.boxfit import ViewShades
 from tracker.config import MeasureConfig, TrackConfig, TrackerConfig
+from tracker.evaluate import evaluate
 from tracker.measure import KnownPart, Measurement
 from tracker.pipeline import Pipeline
 from tracker.shades import ShadeEstimate
@@ -75,6 +76,31 @@ def test_a_track_learns_its_parts_side_shades_from_its_views():
     for belt in (scene.belt_level, 0.88 * scene.belt_level):
         truth = [(s * intensity - belt) / (intensity - belt) for s in _SIDE_SHADE]
         assert np.allclose(told[-1].shades, truth, atol=0.07), (told[-1], truth)
+
+
+def test_with_the_height_given_a_track_learns_its_side_shades_too():
+    """--part-height given: the track learns its part's side shades as it does once a height is voted on,
+    and lends them to its fits, whose slivers of side face (the tests' 10 mm box straight down: 0-3 px)
+    otherwise read wherever each fit started. Measured: the rendered shades to 0.02, and the centroid
+    0.014 mm off on average against 0.042 without (measure.learn_shades false; no track learns them)."""
+    scene = _box_scene(10, 0)
+    renderer, frames = rendered(scene)
+    truths = [truth for _, truth in frames]
+    errors = {}
+    for learn in (True, False):
+        pipeline = Pipeline(renderer.calibration, TrackerConfig(measure=MeasureConfig(part_height_mm=10,
+                                                                                   learn_shades=learn)))
+        told, poses = [], []
+        for i, (image, _) in enumerate(frames):
+            poses.append(pipeline.process(i, image, scene.t_ns(i)).to_dict())
+            told += [track.shades.prior() for track in pipeline.tracker.tracks if track.shades is not None]
+        assert (len(told) > 40) if learn else not told
+        errors[learn] = evaluate(poses, truths, skip_first=2).summary()["centroid_mean_mm"]
+        if learn:
+            intensity = scene.parts[0].intensity
+            truth = [(s * intensity - scene.belt_level) / (intensity - scene.belt_level) for s in _SIDE_SHADE]
+            assert np.allclose(told[-1].shades, truth, atol=0.07), (told[-1], truth)
+    assert errors[True] <= 0.03 and errors[False] > 2 * errors[True], errors
 
 
 def _converged_error_mm(frames: list[tuple[dict, dict]], height_mm: float) -> tuple[float, float]:

@@ -1,10 +1,12 @@
-"""The renderer itself: its edges are where OpenCV's own projection says they are."""
+"""The renderer itself: its edges are where OpenCV's own projection says they are, and its faces cover
+each pixel as much as their exact projected polygons do."""
 
 import math
 
 import cv2
 import numpy as np
 import pytest
+from conftest import BOX_SUPERSAMPLE
 
 from tracker.synthetic import STRONG_DISTORTION, CameraSpec, PartSpec, Renderer, SceneSpec
 
@@ -90,3 +92,70 @@ def test_motion_blur_noise_and_flicker_are_deterministic_and_present():
     assert np.array_equal(a, b)
     means = [Renderer(noisy).render(i)[0].mean() for i in range(3)]
     assert np.ptp(means) > 0.2  # flicker changes the overall level from frame to frame
+
+
+def _area_in_pixel(polygon: np.ndarray, col: int, row: int) -> float:
+    """The area of a convex polygon (image px) inside pixel (col, row), whose centre is (col, row)."""
+    points = [tuple(p) for p in polygon]
+    for axis, bound, keep_above in ((0, col - 0.5, True), (0, col + 0.5, False), (1, row - 0.5, True),
+                                    (1, row + 0.5, False)):
+        inside = [(p[axis] >= bound) == keep_above or p[axis] == bound for p in points]
+        clipped = []
+        for k, b in enumerate(points):
+            a = points[k - 1]
+            if inside[k - 1] != inside[k]:
+                f = (bound - a[axis]) / (b[axis] - a[axis])
+                clipped.append((a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])))
+            if inside[k]:
+                clipped.append(b)
+        points = clipped
+        if len(points) < 3:
+            return 0.0
+    x, y = np.array(points).T
+    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
+@pytest.mark.parametrize("angle_deg", [3, 17, 31, 44, 58, 72])
+def test_a_thin_boxs_faces_cover_each_pixel_as_their_exact_polygons_do(angle_deg):
+    """A 5 mm box under a camera tilted 20 deg: its top and the side faces it shows (slivers of 1-3 px),
+    rendered with the tests' sampling (BOX_SUPERSAMPLE), against their projected polygons' exact areas
+    in each pixel. What a measurement reads is an edge averaged over a few pixels: over every 8 px of a
+    face's footprint edge, the rendered area is within 0.015 px of the face's width of the exact one
+    (measured: 0.008 at worst; at 4 samples, 0.067)."""
+    cam = CameraSpec(width=480, height=360, focal_px=420.0, tilt_deg=20, yaw_deg=15)
+    part = PartSpec(80, 50, 5.0, 60, 20, angle_deg)
+    renderer = Renderer(SceneSpec(cam, (part,), n_frames=1, noise_sigma=0, blur_samples=1,
+                                  supersample=BOX_SUPERSAMPLE))
+    pose = part.pose(0.0)
+    r0, _, c0, _ = roi = renderer._roi(part, [pose])
+    cover = renderer._coverage(part, pose, roi)  # (top, sides facing X, sides facing Y)
+    calib = renderer.calibration
+    rot = calib.rotation()
+    camera_centre = -rot.T @ calib.belt_tvec.reshape(3)
+    x, y, a = pose
+    c, s = math.cos(math.radians(a)), math.sin(math.radians(a))
+    hl, hw = part.length_mm / 2, part.width_mm / 2
+    foot = np.array([[x + c * u - s * v, y + s * u + c * v, 0.0]
+                     for u, v in ((-hl, -hw), (hl, -hw), (hl, hw), (-hl, hw))])
+    top = foot - [0.0, 0.0, part.height_mm]  # Z points into the belt
+    faces = [(0, top)]
+    for i in range(4):
+        j = (i + 1) % 4
+        outward = np.append(foot[j, :2] - foot[i, :2], 0.0)[[1, 0, 2]] * [1, -1, 0]
+        if outward @ (camera_centre - foot[i]) > 0:  # the camera sees it
+            faces.append((1 if i % 2 else 2, np.array([foot[i], foot[j], top[j], top[i]])))
+    assert len(faces) >= 2
+    for kind, corners in faces:
+        polygon = cv2.projectPoints(corners, calib.belt_rvec, calib.belt_tvec, calib.camera_matrix,
+                                    calib.dist_coeffs)[0].reshape(-1, 2)
+        near = np.zeros(cover.shape[1:], np.uint8)
+        cv2.fillConvexPoly(near, np.round((polygon - [c0, r0]) * 16).astype(np.int32), 1, shift=4)
+        rows, cols = np.nonzero(cv2.dilate(near, np.ones((5, 5), np.uint8)))
+        exact = np.array([_area_in_pixel(polygon, col + c0, row + r0) for row, col in zip(rows, cols, strict=True)])
+        error = cover[kind, rows, cols] - exact
+        start, end = polygon[0], polygon[1]  # the face's first edge (a side face's footprint edge)
+        length = float(np.linalg.norm(end - start))
+        along = (np.column_stack([cols + c0, rows + r0]) - start) @ ((end - start) / length)
+        inner = (along > 4) & (along < length - 4)  # not the corners, where faces meet
+        per_window = np.bincount((along[inner] // 8).astype(int), weights=error[inner])[1:-1] / 8
+        assert len(per_window) and np.abs(per_window).max() <= 0.015, (kind, np.abs(per_window).max())

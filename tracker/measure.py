@@ -277,7 +277,11 @@ class Measurer:
                            converged_steps=PRECISE_STEPS if cfg.estimate_height else CONVERGED_STEPS, **kwargs)
 
         if not cfg.estimate_height:
-            return fit(cfg.part_height_mm, size_prior=self._size_of(known)), ()
+            # Its height given: its size and side shades lent; what the view tells of the shades goes
+            # back to the track (from a sharp image only, as below).
+            return fit(cfg.part_height_mm, size_prior=self._size_of(known),
+                       shade_prior=None if known is None else known.shades,
+                       tell_shades=cfg.learn_shades and self._blur_px == 0 and cfg.part_height_mm > 0), ()
         if known is not None and known.height_mm is not None:
             # Its height voted on, being refined. Its pose: a box of that height, its size and side shades
             # lent (with the height free too, a thin part's fit wanders along the valley where height
@@ -433,7 +437,8 @@ class KnownPart:
     last_vote_mm: tuple[float, float] | None = None
     vote_step_mm: float = 0.0
     leading_mm: float | None = None
-    # Being refined: the side shades its views have told (tracker/shades.py; None: none yet).
+    # Its height given, or being refined: the side shades its views have told (tracker/shades.py; None:
+    # none yet).
     shades: ShadePrior | None = None
 
     def votes_at(self, x_mm: float, y_mm: float) -> bool:

@@ -12,8 +12,9 @@ wide enough tell its shade, and the track lends it to the rest, as it lends its 
 ``track.shade_view_min_sigma`` down; one that tells it worse than ``track.shade_view_max_sigma`` is
 left out; and the oldest views weigh less than the newest (``track.shade_memory_views``): a face
 turning towards or away from a lamp changes its shade. With ``measure.learn_shades`` (on by
-default; the README says what it gains and costs), a track learns them once its part's height is
-voted on (see Track._learn_shades), from sharp images only.
+default; the README says what it gains and costs), a track learns them from sharp images only: with
+the height given from every view, with --part-height auto once its part's height is voted on (see
+Track._learn_shades).
 """
 
 from __future__ import annotations

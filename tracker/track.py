@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
-from tracker.boxfit import SizePrior
+from tracker.boxfit import SizePrior, ViewShades
 from tracker.config import TrackConfig
 from tracker.geometry import Rect, rectangle_corners, wrap_angle_deg
 from tracker.height import HeightEstimate
@@ -27,8 +27,8 @@ class Track:
         self.id = track_id
         # --part-height auto: what its views tell of its height (None: heights given, or none).
         self.height = HeightEstimate(cfg) if estimating_height else None
-        # --part-height auto with measure.learn_shades: its side shades as its views tell them, once its
-        # height is voted on.
+        # With measure.learn_shades: its side shades as its views tell them (--part-height auto: once
+        # its height is voted on).
         self.shades: ShadeEstimate | None = None
         if self.height is not None:
             self.height.add(m, *m.seen_at_mm)
@@ -108,6 +108,8 @@ class Track:
         self.size_var_mm2 = (1 - a) * self.size_var_mm2 + a * float(np.mean(self._size_residuals(m) ** 2))
         self.pickable = m.pickable
         r = m.rect
+        if self.height is None and m.view_shades is not None:  # its height given
+            self._add_shades(m.view_shades, cfg)
         if self.height is not None:
             leading = self.height.leading_mm, self.height.flat, self.height.voting
             self.height.add(m, *m.seen_at_mm)
@@ -154,9 +156,12 @@ class Track:
             self.shades = None
         elif m.view_shades is not None and (lead_mm is None
                                             or abs(lead_mm - self.height.height_mm) <= cfg.view_height_sigma_mm):
-            if self.shades is None:
-                self.shades = ShadeEstimate(cfg)
-            self.shades.add(m.view_shades)
+            self._add_shades(m.view_shades, cfg)
+
+    def _add_shades(self, view: ViewShades, cfg: TrackConfig) -> None:
+        if self.shades is None:
+            self.shades = ShadeEstimate(cfg)
+        self.shades.add(view)
 
     def _reseat(self, r: Rect, cfg: TrackConfig) -> None:
         """Take the position and size of rectangle ``r`` as the part's (its sides in the filter's order):
@@ -185,7 +190,8 @@ class Track:
         sigma = np.sqrt(np.maximum(np.diag(self.kf.P)[[LENGTH, WIDTH]], cfg.known_size_sigma_mm**2))
         size = SizePrior(float(x[LENGTH]), float(x[WIDTH]), *map(float, sigma))
         if self.height is None:
-            return KnownPart(float(x[X]), float(x[Y]), size)
+            shades = None if self.shades is None else self.shades.prior()
+            return KnownPart(float(x[X]), float(x[Y]), size, shades=shades)
         if self.height.flat:
             return KnownPart(float(x[X]), float(x[Y]), size, flat=True)
         if self.height.voting:
