@@ -127,8 +127,10 @@ class ViewShades:
     shades: tuple[float, float]
     variances: tuple[float, float]
     # Whether the view tells, beyond _OUTSIDE_SIGMAS of its uncertainty, a shade no side has (at least
-    # the top's, or below _SHADE_RANGE): a box of this height explains the view only as some other
-    # shape would (a taller box's sides as bright as its top pass for a flat part's larger top).
+    # the top's, or below _SHADE_RANGE; or the shades' solution stops at that range's least and the
+    # view's step finds none in it): a box of this height explains the view only as some other shape
+    # would (a taller box's sides as bright as its top pass for a flat part's larger top; its sides as
+    # dark as the belt, for a flat part's top).
     outside: tuple[bool, bool] = (False, False)
 
 
@@ -307,7 +309,10 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
         variances[shown] = np.diag(cov) * max(float(np.mean(r**2)), 1e-12)
     variances = np.maximum(variances, floor)
     margin = _OUTSIDE_SIGMAS * np.sqrt(variances)
-    outside = wide & ((own + margin < _SHADE_RANGE[0]) | (own - margin >= _SHADE_TOLD_MAX))
+    # A shown face whose shades' solution stops at the least shade a side may have, and whose step from
+    # there finds no shade a side has either, wants a darker one than any side has.
+    pinned = shown & (shades <= _SHADE_RANGE[0]) & ~((own >= _SHADE_RANGE[0]) & (own < _SHADE_TOLD_MAX))
+    outside = wide & (pinned | (own + margin < _SHADE_RANGE[0]) | (own - margin >= _SHADE_TOLD_MAX))
     variances[~(variances > 0) | (own < _SHADE_RANGE[0]) | (own >= _SHADE_TOLD_MAX)] = math.inf
     return ViewShades((float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])),
                       (bool(outside[0]), bool(outside[1])))
