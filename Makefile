@@ -27,6 +27,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/real_videos.py
 	$(BIN)/python bench/belt_motion.py
 	$(BIN)/python bench/heights.py
+	$(BIN)/python bench/heights_random.py
 
 # Remakes the bundled demo recording (the same bytes for the same software: no wall-clock time in it).
 demo: $(STAMP)
