@@ -246,7 +246,8 @@ class TrackConfig:
     view_gate_chi2: float = 25.0
     view_gate_frames: int = 10
     # The height is converged once its 1-sigma uncertainty is below this (mm) over at least this many
-    # views; from then on every height_refine_every-th view still tells its own (a second box fit).
+    # views that agree with it (also those too unsure to add to it, view_height_told_sigma_mm); from
+    # then on every height_refine_every-th view still tells its own (a second box fit).
     height_converged_sigma_mm: float = 0.3
     height_converged_views: int = 5
     height_refine_every: int = 3

@@ -29,7 +29,9 @@ size. The estimate has two stages.
    estimate beyond ``track.view_gate_chi2`` is left out (a hand over the part, a fit gone astray); one
    that keeps disagreeing for ``track.view_gate_frames`` views starts the vote again (meanwhile the
    height told is the one voted on again). The height has converged once its uncertainty is below
-   ``track.height_converged_sigma_mm`` over ``track.height_converged_views`` views, and stays so until
+   ``track.height_converged_sigma_mm`` over ``track.height_converged_views`` views that agree with it
+   (those that add nothing to it too: a part passing under the camera shows no side for many views),
+   and stays so until
    it exceeds ``track.height_unconverged_sigma_mm`` (or the vote is held again); from then on every
    ``track.height_refine_every``-th view still tells its own.
 """
@@ -112,7 +114,7 @@ class HeightEstimate:
         # The refinement: the information on (length, width, height) and its vector.
         self._info: np.ndarray | None = None
         self._vec = np.zeros(3)
-        self._refine_views = 0
+        self._refine_views = 0  # refining views that agreed with the estimate (added to it or not)
         self._chi2s: list[float] = []  # each refining view's disagreement with the estimate
         self._disagreeing = 0
         self._since_refine = 0  # views since the last that told its own shape
@@ -351,11 +353,11 @@ class HeightEstimate:
                 self._held_mm = held
             return
         self._disagreeing = 0
+        self._refine_views += 1
         if weak:
             return
         self._info = self._info + info
         self._vec = self._vec + vec
-        self._refine_views += 1
 
 
 def _weighted_mean(sizes: np.ndarray, weights: np.ndarray) -> np.ndarray:
