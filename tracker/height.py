@@ -31,9 +31,8 @@ size. The estimate has two stages.
    height told is the one voted on again). The height has converged once its uncertainty is below
    ``track.height_converged_sigma_mm`` over ``track.height_converged_views`` views that agree with it
    (those that add nothing to it too: a part passing under the camera shows no side for many views),
-   and stays so until
-   it exceeds ``track.height_unconverged_sigma_mm`` (or the vote is held again); from then on every
-   ``track.height_refine_every``-th view still tells its own.
+   and stays so until it exceeds ``track.height_unconverged_sigma_mm`` (or the vote is held again);
+   from then on every ``track.height_refine_every``-th view still tells its own.
 """
 
 from __future__ import annotations
