@@ -19,7 +19,6 @@ import argparse
 import json
 import math
 import sys
-from collections import Counter
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -27,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 
 from tracker.config import MeasureConfig, TrackerConfig  # noqa: E402
-from tracker.evaluate import evaluate  # noqa: E402
+from tracker.evaluate import centroid_error_mm, evaluate, own_track, part_views  # noqa: E402
 from tracker.pipeline import Pipeline  # noqa: E402
 from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec  # noqa: E402
 
@@ -72,24 +71,10 @@ def auto_errors(poses: list[dict], truths: list[dict]) -> dict:
     often (the part's own track, not the ghost a part in view at the start leaves behind)."""
     out: dict[str, list[float]] = {"h_before": [], "h_after": [], "c_before": [], "c_after": []}
     for k in range(len(truths[0]["objects"])):
-        matched = []
-        for pose, truth in zip(poses, truths, strict=True):
-            t = truth["objects"][k]
-            seen = [o for o in pose["objects"] if o["measured"]]
-            if t is None or t["border_px"] <= 4 or not seen:
-                continue
-            o = min(seen, key=lambda o: math.hypot(o["x_mm"] - t["x_mm"], o["y_mm"] - t["y_mm"]))
-            c = math.hypot(o["x_mm"] - t["x_mm"], o["y_mm"] - t["y_mm"])
-            if c < t["width_mm"] / 2:
-                matched.append((o, t, c))
-        if not matched:
-            continue
-        own = Counter(o["id"] for o, _, _ in matched).most_common(1)[0][0]
-        for o, t, c in matched:
-            if o["id"] == own:
-                when = "after" if o["height_converged"] else "before"
-                out[f"h_{when}"].append(abs(o["height_mm"] - t["height_mm"]))
-                out[f"c_{when}"].append(c)
+        for o, t in own_track(part_views(poses, truths, k)):
+            when = "after" if o["height_converged"] else "before"
+            out[f"h_{when}"].append(abs(o["height_mm"] - t["height_mm"]))
+            out[f"c_{when}"].append(centroid_error_mm(o, t))
     return {k: (float(np.mean(v)) if v else math.nan) for k, v in out.items()} | {
         "converged_fraction": len(out["h_after"]) / max(1, len(out["h_after"]) + len(out["h_before"])),
         "h_after_max": float(np.max(out["h_after"])) if out["h_after"] else math.nan}

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from collections import Counter
 from multiprocessing import Pool
@@ -27,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 
 from tracker.config import MeasureConfig, TrackerConfig  # noqa: E402
-from tracker.evaluate import evaluate  # noqa: E402
+from tracker.evaluate import centroid_error_mm, evaluate, own_track, part_views  # noqa: E402
 from tracker.pipeline import Pipeline  # noqa: E402
 from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec  # noqa: E402
 
@@ -57,10 +56,6 @@ def scene(k: int) -> SceneSpec:
                      supersample=8, blur_samples=3, belt_level=float(rng.uniform(50, 80)), seed=k)
 
 
-def _centroid_mm(o: dict, t: dict) -> float:
-    return math.hypot(o["x_mm"] - t["x_mm"], o["y_mm"] - t["y_mm"])
-
-
 def _run(spec: SceneSpec, frames: list, measure: MeasureConfig) -> list[dict]:
     pipeline = Pipeline(Renderer(spec).calibration, TrackerConfig(measure=measure))
     return [pipeline.process(i, image, spec.t_ns(i)).to_dict() for i, (image, _) in enumerate(frames)]
@@ -78,20 +73,9 @@ def measure_scene(k: int) -> dict:
         given = evaluate(_run(spec, frames, MeasureConfig(part_height_mm=part.height_mm)), truths, skip_first=2)
         summary = given.summary()
         row |= {"given_mean_mm": summary["centroid_mean_mm"], "given_p95_mm": summary["centroid_p95_mm"]}
-    poses = _run(spec, frames, MeasureConfig(estimate_height=True))
-    # The part's own track: the measured object nearest it, of the track that is so most often.
-    matched = []
-    for pose, truth in zip(poses, truths, strict=True):
-        t = truth["objects"][0]
-        seen = [o for o in pose["objects"] if o["measured"]]
-        if t is not None and t["border_px"] > 4 and seen:
-            o = min(seen, key=lambda o: _centroid_mm(o, t))
-            if _centroid_mm(o, t) < t["width_mm"] / 2:
-                matched.append((o, t))
-    if not matched:
+    frames_own = own_track(part_views(_run(spec, frames, MeasureConfig(estimate_height=True)), truths, 0))
+    if not frames_own:
         return row | {"converged": None}
-    own = Counter(o["id"] for o, _ in matched).most_common(1)[0][0]
-    frames_own = [(o, t) for o, t in matched if o["id"] == own]
     converged = [i for i, (o, _) in enumerate(frames_own) if o["height_converged"]]
     if not converged:
         return row | {"converged": None}
@@ -100,8 +84,9 @@ def measure_scene(k: int) -> dict:
     return row | {
         "converged": first / len(frames_own),
         "height_max_mm": max(abs(o["height_mm"] - part.height_mm) for o, _ in after),
-        "centroid_after_mm": float(np.mean([_centroid_mm(o, t) for o, t in after])),
-        "centroid_before_mm": float(np.mean([_centroid_mm(o, t) for o, t in frames_own[:first]])) if first else 0.0,
+        "centroid_after_mm": float(np.mean([centroid_error_mm(o, t) for o, t in after])),
+        "centroid_before_mm": (float(np.mean([centroid_error_mm(o, t) for o, t in frames_own[:first]]))
+                               if first else 0.0),
         "unconverged_after": sum(not o["height_converged"] for o, _ in after)}
 
 

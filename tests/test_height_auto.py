@@ -22,6 +22,7 @@ from textured_support import mpeg4_round_trip, textured_run
 
 from tracker.boxfit import ViewShades
 from tracker.config import MeasureConfig, SegmentConfig, TrackConfig, TrackerConfig
+from tracker.evaluate import centroid_error_mm, own_track, part_views
 from tracker.geometry import Rect
 from tracker.height import HeightEstimate, HeightTrial, _rect_at
 from tracker.measure import Measurement
@@ -36,22 +37,10 @@ def _auto(height_mm: float, tilt_deg: float, **measure) -> list[tuple[dict, dict
     ``measure``: settings of the measurement beside estimate_height."""
     scene = _box_scene(height_mm, tilt_deg)
     poses, truths = run_pipeline(scene, TrackerConfig(measure=MeasureConfig(estimate_height=True, **measure)))
-    matched = []
-    for pose, truth in zip(poses, truths, strict=True):
-        t = truth["objects"][0]
-        seen = [o for o in pose["objects"] if o["measured"]]
-        if t is not None and t["border_px"] > 4 and seen:
-            o = min(seen, key=lambda o: _centroid_mm(o, t))
-            if _centroid_mm(o, t) < t["width_mm"] / 2:
-                matched.append((o, t))
-    own = Counter(o["id"] for o, _ in matched).most_common(1)[0][0]
-    frames = [(o, t) for o, t in matched if o["id"] == own]
+    matched = part_views(poses, truths, 0)
+    frames = own_track(matched)
     assert len(frames) >= 0.9 * len(matched), Counter(o["id"] for o, _ in matched)
     return frames
-
-
-def _centroid_mm(o: dict, t: dict) -> float:
-    return math.hypot(o["x_mm"] - t["x_mm"], o["y_mm"] - t["y_mm"])
 
 
 # The tests' grid (the README lists all 15 cells; the flat parts below). 10 mm straight down meets the
@@ -74,8 +63,8 @@ def test_auto_estimates_a_box_height(height_mm, tilt_deg):
     after = frames[converged[0]:]
     assert all(o["height_converged"] for o, _ in after)
     assert max(abs(o["height_mm"] - height_mm) for o, _ in after) <= 0.5, [o["height_mm"] for o, _ in after]
-    assert np.mean([_centroid_mm(o, t) for o, t in after]) <= 0.2
-    assert np.mean([_centroid_mm(o, t) for o, t in frames[:converged[0]]]) <= 1.0
+    assert np.mean([centroid_error_mm(o, t) for o, t in after]) <= 0.2
+    assert np.mean([centroid_error_mm(o, t) for o, t in frames[:converged[0]]]) <= 1.0
 
 
 @pytest.mark.parametrize("tilt_deg", [0, 10, 20])
@@ -90,7 +79,7 @@ def test_auto_finds_a_flat_part_flat(tilt_deg):
     after = [(o, t) for o, t in frames if o["height_converged"]]
     assert len(after) >= 2 / 3 * len(frames), (len(after), len(frames))
     assert all(o["height_mm"] == 0.0 for o, _ in after)
-    assert np.mean([_centroid_mm(o, t) for o, t in after]) <= 0.05
+    assert np.mean([centroid_error_mm(o, t) for o, t in after]) <= 0.05
     # Its size too, as flat mode measures it (its edges read against the part's own level, not, as a
     # box's are, against the pixel next to each edge: that read its sides 0.15-0.2 mm long); so also
     # while flat leads the vote (height 0 before it is decided).
@@ -100,7 +89,7 @@ def test_auto_finds_a_flat_part_flat(tilt_deg):
                if not o["height_converged"] and o["height_mm"] == 0.0]
     assert len(leading) >= 3 and np.mean(leading) <= 0.06, leading
     # Before it is decided, posed at whichever height leads (the issue's bound).
-    before = [_centroid_mm(o, t) for o, t in frames if not o["height_converged"]]
+    before = [centroid_error_mm(o, t) for o, t in frames if not o["height_converged"]]
     assert np.mean(before) <= 1.0, before
 
 
@@ -389,19 +378,12 @@ def test_two_parts_of_different_heights_each_get_their_own():
     poses, truths = run_pipeline(scene, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
     assert len({o["id"] for p in poses for o in p["objects"]}) == 2
     for k in range(2):
-        frames = []
-        for pose, truth in zip(poses, truths, strict=True):
-            t = truth["objects"][k]
-            seen = [o for o in pose["objects"] if o["measured"]]
-            if t is not None and t["border_px"] > 4 and seen:
-                o = min(seen, key=lambda o: _centroid_mm(o, t))
-                if _centroid_mm(o, t) < parts[k].width_mm / 2:
-                    frames.append((o, t))
+        frames = part_views(poses, truths, k)
         converged = [i for i, (o, _) in enumerate(frames) if o["height_converged"]]
         assert converged and converged[0] <= len(frames) / 3, (k, converged[:1], len(frames))
         after = frames[converged[0]:]
         assert max(abs(o["height_mm"] - parts[k].height_mm) for o, _ in after) <= 0.5, k
-        assert np.mean([_centroid_mm(o, t) for o, t in after]) <= 0.2, k
+        assert np.mean([centroid_error_mm(o, t) for o, t in after]) <= 0.2, k
 
 
 def test_on_a_textured_moving_belt_each_part_keeps_one_track_and_its_height():
@@ -467,7 +449,7 @@ def test_flat_parts_on_a_textured_moving_belt_keep_their_tracks_and_flat_poses()
     for pose, (_, truth) in zip(poses, frames, strict=True):
         for o in pose["objects"]:
             if o["measured"] and o["height_mm"] == 0.0:
-                flat.append(min(_centroid_mm(o, t) for t in truth["objects"] if t is not None))
+                flat.append(min(centroid_error_mm(o, t) for t in truth["objects"] if t is not None))
     assert len(flat) >= 30 and np.mean(flat) <= 0.1, flat
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -88,3 +89,32 @@ def evaluate(poses: list[dict], truths: list[dict], skip_first: int = 0) -> Accu
             acc.length_mm.append(o["length_mm"] - t["length_mm"])
             acc.width_mm.append(o["width_mm"] - t["width_mm"])
     return acc
+
+
+def centroid_error_mm(obj: dict, truth: dict) -> float:
+    """How far a reported object's centre is from a true part's (mm)."""
+    return math.hypot(obj["x_mm"] - truth["x_mm"], obj["y_mm"] - truth["y_mm"])
+
+
+def part_views(poses: list[dict], truths: list[dict], part: int) -> list[tuple[dict, dict]]:
+    """(object, truth) of the ``part``-th true part in each frame it is wholly in view (more than
+    VISIBLE_MARGIN_PX from the image's border) with a measured object within half its width of it: the
+    nearest such object. ``poses`` and ``truths`` are frame by frame."""
+    views = []
+    for pose, truth in zip(poses, truths, strict=True):
+        t = truth["objects"][part]
+        seen = [o for o in pose["objects"] if o["measured"]]
+        if t is not None and t["border_px"] > VISIBLE_MARGIN_PX and seen:
+            o = min(seen, key=lambda o: centroid_error_mm(o, t))
+            if centroid_error_mm(o, t) < t["width_mm"] / 2:
+                views.append((o, t))
+    return views
+
+
+def own_track(views: list[tuple[dict, dict]]) -> list[tuple[dict, dict]]:
+    """Those of a part's ``views`` (see part_views) whose object is of the track that is so most often:
+    the part's own, not the ghost a part in view at the start leaves behind."""
+    if not views:
+        return []
+    own = Counter(o["id"] for o, _ in views).most_common(1)[0][0]
+    return [(o, t) for o, t in views if o["id"] == own]
