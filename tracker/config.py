@@ -122,8 +122,12 @@ class MeasureConfig:
     # see tracker/height.py): --part-height auto, the default (contract section 3). A height given
     # (part_height_mm > 0) is not estimated; false with part_height_mm 0: every part flat.
     estimate_height: bool = True
-    # Heights (mm) a part's vote tries.
-    height_starts_mm: tuple = (0.0, 5.0, 10.0, 20.0, 40.0, 60.0)
+    # Heights (mm) a part's vote tries. One view tells only which of these its edges fit best, and its
+    # pose until the next vote is that height's: a part 10 mm from every height tried (30 mm, with 20
+    # and 40) led at the wrong one, even flat, for several frames (bench/heights_random.py with heights
+    # drawn from 3-60 mm: 29 of 60 scenes met issue 10's bounds with 0, 5, 10, 20, 40, 60; 41 with these).
+    # Each costs a box fit in each of a part's vote views.
+    height_starts_mm: tuple = (0.0, 5.0, 10.0, 15.0, 20.0, 30.0, 40.0, 60.0)
     # At most this many parts vote in one frame (a vote is a box fit per height); the others wait for
     # the next frame, fitted at their leading height meanwhile.
     height_votes_per_frame: int = 1
@@ -214,8 +218,9 @@ class TrackConfig:
     height_vote_size_sigma_mm: float = 0.1
     height_vote_view_cap: float = 25.0
     height_vote_cost_weight: float = 0.2
-    # The best height wins once it leads the next by this margin (a chi-square) over at least
-    # height_vote_min_views views, or after height_vote_views views.
+    # The best height wins once it leads by this margin (a chi-square) the heights tried that do not
+    # bracket the vote's lead (flat: all others), over at least height_vote_min_views views, or after
+    # height_vote_views views.
     height_vote_margin: float = 25.0
     height_vote_min_views: int = 3
     height_vote_views: int = 8

@@ -12,8 +12,9 @@ size. The estimate has two stages.
    over the views, how much its sizes scatter (what decides it; no view adds more than
    ``track.height_vote_view_cap``) and how much worse its boxes explain the edges than the view's best
    height (weighted ``track.height_vote_cost_weight``: a box fit stopped short costs as much as a wrong
-   height). The best height wins once it leads the next by ``track.height_vote_margin`` (from
-   ``track.height_vote_min_views`` views on), or after ``track.height_vote_views`` views. A winner of 0
+   height). The best height wins once it leads by ``track.height_vote_margin`` every height tried that
+   does not bracket the vote's lead (see _rivals; from ``track.height_vote_min_views`` views on), or
+   after ``track.height_vote_views`` views. A winner of 0
    makes the part flat: from then on it is measured as flat, exactly as a flat part always was. A
    part's height is rarely one of those tried: between the best height's neighbours (halfway to
    each) every view's sizes are interpolated, and the height where they agree best leads the vote
@@ -67,7 +68,8 @@ class HeightTrial:
 
     height_mm: float
     rect: Rect
-    # The fit's RMS residual (px) over its windows.
+    # The fit's RMS residual (px), over the windows some height's fit kept in a sharp image (see
+    # boxfit.comparable_ms_px2): comparable between the heights a view is fitted at.
     rms_px: float
     windows: int
     # How well the view alone decides the length and width at this height (variances, mm^2).
@@ -242,10 +244,23 @@ class HeightEstimate:
         self._size_vars.append(np.array([t.size_var_mm2 for t in trials]) + self._cfg.height_vote_size_sigma_mm**2)
         scores = self._scores()
         self._lead = self._between(int(np.argmin(scores)))
-        ranked, votes = np.sort(scores), len(self._excess)
-        if votes >= self._cfg.height_vote_views or (
-                votes >= self._cfg.height_vote_min_views and ranked[1] - ranked[0] >= self._cfg.height_vote_margin):
+        votes = len(self._excess)
+        if votes >= self._cfg.height_vote_views or (votes >= self._cfg.height_vote_min_views and (
+                self._rivals(self._lead[0]).min(initial=np.inf) - scores.min() >= self._cfg.height_vote_margin)):
             self._decide()
+
+    def _rivals(self, height_mm: float) -> np.ndarray:
+        """The scores of the heights tried that the vote's lead has to lead by track.height_vote_margin to
+        win: all but the two that bracket it (its neighbours, where it is one of them), and flat's unless
+        flat leads (a part found flat is measured flat for good, while the refinement moves a box's height
+        within its bracket: a part between two heights tried, 8 mm, fits both alike and their scores
+        kept within the margin of each other for 6 views)."""
+        heights, scores = np.array(self.heights_mm), self._scores()
+        below, above = heights[heights < height_mm], heights[heights > height_mm]
+        low = below.max() if below.size else -np.inf
+        high = above.min() if above.size else np.inf
+        apart = (heights < low) | (heights > high) | ((heights == 0) != (height_mm == 0))
+        return scores[apart & (heights != height_mm)]
 
     def _scores(self) -> np.ndarray:
         """Each height's score (lower is better), in units of a chi-square."""

@@ -19,6 +19,8 @@ _GUARD_PX = 7
 _GUARD_REACH = 2 * (_GUARD_PX // 2)
 # Pixels around a parked blob compared with it to tell a ghost from a parked part.
 _GHOST_RING_PX = _GUARD_PX
+# How far around each pixel of the first frame's suspect region the belt is carried in from (px).
+_INPAINT_RADIUS_PX = 5
 
 
 class Segmenter:
@@ -79,7 +81,11 @@ class Segmenter:
             suspect = np.zeros_like(suspect)
         suspect = cv2.dilate(suspect, self._guard)
         self._suspect = suspect if cv2.countNonZero(suspect) else None
-        self.background = np.where(suspect > 0, level, frame)
+        # What stands in for the belt there: the belt around it carried in (its lighting varies across the
+        # view: at the view's edge the median level was off by several grey levels, and a part's first
+        # edges read against it).
+        fill = level if self._suspect is None else cv2.inpaint(frame, suspect, _INPAINT_RADIUS_PX, cv2.INPAINT_TELEA)
+        self.background = np.where(suspect > 0, fill, frame)
         self.reference = self.background.astype(np.float32)
         self._still_steps = np.zeros(frame.shape, dtype=np.uint8)
         self._prev = frame
