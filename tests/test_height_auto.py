@@ -2,8 +2,8 @@
 (tracker/height.py), against exact truth on rendered boxes; and the vote itself on made-up views.
 
 Measured on these scenes (480x360, 80x50 mm parts crossing the view while turning, rendered with
-BOX_SUPERSAMPLE): once converged, the height within 0.02-0.36 mm on average (0.38 at worst) and the
-centroid within 0.01-0.10 mm; flat parts flat in every converged frame.
+BOX_SUPERSAMPLE): once converged, the height within 0.03-0.19 mm on average (0.28 at worst) and the
+centroid within 0.01-0.04 mm; flat parts flat in every converged frame.
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ def _auto(height_mm: float, tilt_deg: float, **measure) -> list[tuple[dict, dict
 # crossing, 1.16 mm off), and since views that tell their height only from the part's apparent size
 # are left out (track.view_height_told_sigma_mm); 5 mm straight down since the scenes are rendered
 # with BOX_SUPERSAMPLE (0.68 mm off once converged at 4x4 samples: its slivers read the sampling's
-# errors; 0.38 now). 8 mm straight down is a height the vote does not try (0.32 mm off at worst).
+# errors; 0.07 now). 8 mm straight down is a height the vote does not try (0.31 mm off at worst).
 @pytest.mark.parametrize("height_mm,tilt_deg", [(5, 0), (5, 10), (5, 20), (8, 0), (10, 0), (10, 10), (10, 20),
                                                 (20, 0), (20, 10), (20, 20), (60, 0), (60, 10), (60, 20)])
 def test_auto_estimates_a_box_height(height_mm, tilt_deg):
