@@ -138,8 +138,8 @@ class ViewShades:
     # the top's, or below _SHADE_RANGE): a box of this height explains the view only as some other shape
     # would (a taller box's sides as bright as its top pass for a flat part's larger top; its sides as
     # dark as the belt, for a flat part's top). A face whose shade the view does not tell (its step
-    # leaps, unsure by 0.2-0.9) tells none: where the shades' solution merely stopped at the range's
-    # least, the part's own height was flagged too (15, 20 and 60 mm boxes near the view's edge).
+    # leaps, unsure by 0.2-0.9) tells none: flagged, the part's own height was counted against (15, 20
+    # and 60 mm boxes near the view's edge).
     outside: tuple[bool, bool] = (False, False)
 
 
@@ -330,7 +330,11 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
         variances[shown] = np.diag(cov) * max(float(np.mean(r**2)), 1e-12)
     variances = np.maximum(variances, floor)
     margin = _OUTSIDE_SIGMAS * np.sqrt(variances)
-    outside = wide & ((own + margin < _SHADE_RANGE[0]) | (own - margin >= _SHADE_TOLD_MAX))
+    # A step that leaps farther than the shades a side may have span is no reading of the shade (the
+    # linear model of a face the view hardly tells: the tests' 15 mm box at 10 deg, its end face solved
+    # at 0.1 and stepped to 3.0 +- 0.9, flagged its own height and the vote chose 20 mm).
+    near = np.abs(own - shades) <= _SHADE_RANGE[1] - _SHADE_RANGE[0]
+    outside = wide & near & ((own + margin < _SHADE_RANGE[0]) | (own - margin >= _SHADE_TOLD_MAX))
     variances[~(variances > 0) | (own < _SHADE_RANGE[0]) | (own >= _SHADE_TOLD_MAX)] = math.inf
     return ViewShades((float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])),
                       (bool(outside[0]), bool(outside[1])))
