@@ -91,9 +91,10 @@ class BoxFit:
     own_size_mm: tuple[float, float] | None = None
     # A box with side faces: what this view alone tells of their shades (see ViewShades).
     view_shades: ViewShades | None = None
-    # Each window's residual (px) and whether the fit kept it (not an outlier): what compares fits of
-    # other boxes to the same windows (see comparable_ms_px2; rms_px leaves out the windows each fit
-    # drops, and a wrong height drops those it cannot explain: a corner's jog, a side face).
+    # With keep_residuals: each window's residual (px) and whether the fit kept it (not an outlier): what
+    # compares fits of other boxes to the same windows (see comparable_ms_px2; rms_px leaves out the
+    # windows each fit drops, and a wrong height drops those it cannot explain: a corner's jog, a side
+    # face).
     residuals_px: np.ndarray | None = field(default=None, compare=False)
     kept: np.ndarray | None = field(default=None, compare=False)
 
@@ -184,7 +185,8 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
             height_mm: float, max_rms_px: float, px_per_norm: float, free_height: bool = False,
             size_prior: SizePrior | None = None, sum_sigma_px: float = 0.1,
             height_prior: tuple[float, float] | None = None, converged_steps: float = CONVERGED_STEPS,
-            shade_prior: ShadePrior | None = None, tell_shades: bool = False) -> BoxFit | None:
+            shade_prior: ShadePrior | None = None, tell_shades: bool = False,
+            keep_residuals: bool = False) -> BoxFit | None:
     """The footprint (and with ``free_height`` the height, from ``height_mm`` on) whose box best
     explains ``windows``, or None when the fit's RMS residual exceeds ``max_rms_px``. ``points_norm``:
     the edge points (Nx2, normalised) that bring the box near first; ``px_per_norm``: the focal
@@ -195,7 +197,8 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     weighed likewise (without: held weakly to middling shades). The height reported is the fitted
     box's; with ``free_height`` the view's own information on its shape (the priors taken back out)
     comes with it, and with ``tell_shades`` what the view tells of its side faces' shades (ViewShades:
-    a Jacobian more)."""
+    a Jacobian more); with ``keep_residuals`` every window's residual and whether the fit kept it (for
+    comparable_ms_px2: the sums once more where it dropped some)."""
     free = [0, 1, 2, 3, 4, *([_H] if free_height else [])]
     params = box_params(start, height_mm)
     shade_start, shade_hold = _DEFAULT_START, _DEFAULT_HOLD
@@ -243,8 +246,6 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     params, r, jac, keep = _robust(middling, params, free, _SUM_ITERATIONS, prior, converged_steps)
     params, r, jac = _least_squares(lambda p: sums(p, keep), params, free, _SUM_ITERATIONS, prior, converged_steps)
     rms = float(np.sqrt(np.mean(r**2))) if len(r) else math.inf
-    every = r if isinstance(keep, slice) else sums(params[None])[0]
-    inlying = np.ones(len(every), dtype=bool) if isinstance(keep, slice) else keep
     # The sums' own normal matrix, inverted once: the size's covariance and, with a size lent, its own estimate.
     normal_inv = np.linalg.pinv(jac.T @ jac) if len(r) > len(free) else None
     size_cov = None if normal_inv is None else _size_covariance(normal_inv, free, rms)
@@ -266,6 +267,10 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
         floor = (sum_sigma_px / np.maximum(widths, 1e-9)) ** 2
         shades = _view_shades(lambda p, s: sums(p, keep, s), params, solved[0], r, free, floor,
                               widths >= _OUTSIDE_MIN_WIDTH_PX)
+    every = inlying = None
+    if keep_residuals:
+        every = r if isinstance(keep, slice) else sums(params[None])[0]
+        inlying = np.ones(len(every), dtype=bool) if isinstance(keep, slice) else keep
     x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0

@@ -245,17 +245,18 @@ class HeightEstimate:
         scores = self._scores()
         self._lead = self._between(int(np.argmin(scores)))
         votes = len(self._excess)
-        if votes >= self._cfg.height_vote_views or (votes >= self._cfg.height_vote_min_views and (
-                self._rivals(self._lead[0]).min(initial=np.inf) - scores.min() >= self._cfg.height_vote_margin)):
+        lead_by = self._rivals(scores, self._lead[0]).min(initial=np.inf) - scores.min()
+        if votes >= self._cfg.height_vote_views or (
+                votes >= self._cfg.height_vote_min_views and lead_by >= self._cfg.height_vote_margin):
             self._decide()
 
-    def _rivals(self, height_mm: float) -> np.ndarray:
-        """The scores of the heights tried that the vote's lead has to lead by track.height_vote_margin to
-        win: all but the two that bracket it (its neighbours, where it is one of them), and flat's unless
-        flat leads (a part found flat is measured flat for good, while the refinement moves a box's height
-        within its bracket: a part between two heights tried, 8 mm, fits both alike and their scores
-        kept within the margin of each other for 6 views)."""
-        heights, scores = np.array(self.heights_mm), self._scores()
+    def _rivals(self, scores: np.ndarray, height_mm: float) -> np.ndarray:
+        """Of the heights tried's ``scores``, those the vote's lead ``height_mm`` has to lead by
+        track.height_vote_margin to win: all but the two that bracket it (its neighbours, where it is one
+        of them), and flat's unless flat leads (a part found flat is measured flat for good, while the
+        refinement moves a box's height within its bracket: a part between two heights tried, 8 mm, fits
+        both alike and their scores kept within the margin of each other for 6 views)."""
+        heights = np.array(self.heights_mm)
         below, above = heights[heights < height_mm], heights[heights > height_mm]
         low = below.max() if below.size else -np.inf
         high = above.min() if above.size else np.inf

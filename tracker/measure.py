@@ -336,16 +336,17 @@ class Measurer:
         cfg = self.config
         # Their shades: for the vote's check, and for the track to learn from the view that decides it.
         tell = self._blur_px == 0 and (cfg.vote_on_shades or cfg.learn_shades)
-        fits = [(h, fit(h, tell_shades=tell and h > 0)) for h in heights_mm]
-        boxes = [f for _, f in fits if f is not None]
-        if not boxes:
-            return [], ()
         # Each height's fit judged over the windows some height's kept (see comparable_ms_px2), in a sharp
         # image: in a blurred one (the textured belt model smooths) a flat part's fit drops more of the
         # windows its knurl disturbs than a box's, whose side shades take some of it up (the tests' flat
         # parts on a knurled belt led at 2.5-10 mm for most of their crossing: 0.64 mm off, 0.37 with
         # each fit's own RMS).
-        ms = iter(comparable_ms_px2(boxes, cfg.sum_sigma_px) if self._blur_px == 0 else [f.rms_px**2 for f in boxes])
+        sharp = self._blur_px == 0
+        fits = [(h, fit(h, tell_shades=tell and h > 0, keep_residuals=sharp)) for h in heights_mm]
+        boxes = [f for _, f in fits if f is not None]
+        if not boxes:
+            return [], ()
+        ms = iter(comparable_ms_px2(boxes, cfg.sum_sigma_px) if sharp else [f.rms_px**2 for f in boxes])
         # A height no box of explains (worse than box_max_rms_px) votes as if it had just that.
         trials = tuple(HeightTrial(h, rect, cfg.box_max_rms_px, len(windows), fitted=False) if f is None else
                        HeightTrial(h, f.rect, math.sqrt(next(ms)), f.windows, _size_variances(f),
