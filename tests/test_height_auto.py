@@ -444,6 +444,20 @@ def test_a_wrong_view_a_young_estimate_let_in_is_left_out_once_the_next_views_di
     assert height.shape()[0] == pytest.approx(start, abs=0.05) and height.converged
 
 
+def test_a_part_parked_under_the_camera_judges_again_only_its_newest_views():
+    """A part that stays in view (a stopped belt) tells a view every few frames for as long as it stays:
+    the newest 64 are judged again as each comes, older ones join the estimate for good (those it is
+    made of) or are dropped, so a view costs the same after hundreds. The estimate stays theirs."""
+    cfg, height = _voted_20_mm()
+    start = height.shape()[0]
+    wrong = _view_telling(np.diag([1e4, 1e4, 1e4]), start - np.array([0.0, 1.4, 0.0]))
+    height.add(wrong, 0.0, 0.0)
+    for k in range(300):
+        height.add(_refining_view(20.0 + (0.2 if k % 2 else -0.2)), 0.0, 0.0)
+        assert len(height._views) <= 64
+    assert height.shape()[0] == pytest.approx(start, abs=0.05) and height.converged and not height.voting
+
+
 def test_two_parts_of_different_heights_each_get_their_own():
     """An 8 mm and a 25 mm box in view at once (heights the vote does not try: it leads and wins between
     them), coming into view from outside at 10 deg tilt. Measured: the 8 mm box converges after 29 %
