@@ -301,6 +301,59 @@ _SEEN = np.array([1.0, 0.0, 0.13])
 _LOOKS = 1e4 * np.outer(_SEEN, _SEEN) + 1e-2 * np.eye(3)
 
 
+# A view whose box of 20 mm fits its edges best (a single view's sizes agree at every height).
+_FITS_BEST_AT_20 = {0.0: 0.06, 5.0: 0.06, 10.0: 0.06}
+
+
+@pytest.mark.parametrize("told_mm,counted", [(20.4, True), (21.2, False)])
+def test_views_between_the_votes_refine_the_height_once_the_vote_decides(told_mm, counted):
+    """The views between the vote's (fitted at the leading height, what each tells of the shape kept)
+    refine the estimate as if they came when the vote decides, and count towards its convergence: a
+    part crossing the view quickly converged only after as many views more (bench/heights_random.py:
+    10 of 120 scenes converged after the first third of their crossing, 2 now). Where they move it
+    more than track.view_height_sigma_mm from the box they were fitted as, they do not count: the
+    views fitted at the estimate decide when it has converged."""
+    cfg = TrackConfig()
+    height = HeightEstimate(cfg)
+    between = _refining_view(told_mm)
+    for k in range(cfg.height_vote_min_views):
+        x = k * cfg.height_vote_step_mm
+        height.add(_view(x, _sizes(x, 20.0), rms_px=_FITS_BEST_AT_20), x, 0.0)
+        if height.voting:
+            for _ in range(2):
+                height.add(between, x + cfg.height_vote_step_mm / 2, 0.0)
+                assert height.voting and height.leading_mm == 20.0  # kept, not voted with
+    assert not height.voting
+    # Without them the estimate would start at the vote's 20 mm, no view yet refining it.
+    assert 20.0 + 0.5 * (told_mm - 20.0) < height.height_mm <= told_mm
+    converged = []
+    for _ in range(cfg.height_converged_views):
+        height.add(between, 0.0, 0.0)
+        converged.append(height.converged)
+    if counted:  # 2 x (min views - 1) = 4 views between, and this one
+        assert converged[0], converged
+    else:
+        assert converged == [False] * (cfg.height_converged_views - 1) + [True]
+
+
+def test_views_between_the_votes_fitted_at_another_height_are_left_out():
+    """A view between votes is fitted at the height then leading, its side shades lent that height's
+    (Track._learn_shades): one fitted at a height the vote's start does not allow (beyond its sigma,
+    HeightEstimate.lead_sigma_mm) would tell another box's shape, and is not taken."""
+    cfg = TrackConfig()
+    height = HeightEstimate(cfg)
+    x = 0.0
+    height.add(_view(x, _sizes(x, 20.0), rms_px={0.0: 0.06, 10.0: 0.06, 20.0: 0.06}), x, 0.0)  # 5 mm fits it best
+    assert height.leading_mm == 5.0
+    height.add(_refining_view(20.6), x + cfg.height_vote_step_mm / 2, 0.0)
+    for k in range(1, cfg.height_vote_views):
+        x = k * cfg.height_vote_step_mm
+        height.add(_view(x, _sizes(x, 20.0)), x, 0.0)
+        if not height.voting:
+            break
+    assert not height.voting and height.height_mm == pytest.approx(20.0, abs=0.05)
+
+
 def test_a_refined_height_converges_only_after_enough_views():
     """However sure each view says it is, the height converges only after track.height_converged_views
     views have told it (one view's certainty says how well it fits, not whether the fit is right)."""

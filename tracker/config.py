@@ -144,11 +144,12 @@ class MeasureConfig:
     # A box's coverage sums scatter by about this much (px, 1 sigma): it weighs a size known from a
     # track's other views against the sums of one view, where a thin side face leaves the size open.
     sum_sigma_px: float = 0.1
-    # A part's track learns its side shades from its views (with --part-height auto once its height is
-    # voted on) and lends them to its fits where a side face is a sliver (tracker/shades.py): one view
-    # of a sliver settles its shade wherever its fit starts, and its height comes out off (the tests'
-    # 10 mm box at 10 deg: 0.18 mm once converged without, 0.07 with); with the height given, its pose
-    # (the same box straight down: centroid 0.042 mm mean without, 0.014 with).
+    # A part's track learns its side shades from its views (with --part-height auto those of its boxes
+    # at the height it is estimated or voted to have, see Track._learn_shades) and lends them to its
+    # fits where a side face is a sliver (tracker/shades.py): one view of a sliver settles its shade
+    # wherever its fit starts, and its height comes out off (the tests' 10 mm box at 10 deg: 0.18 mm
+    # once converged without, 0.07 with); with the height given, its pose (the same box straight down:
+    # centroid 0.042 mm mean without, 0.014 with).
     learn_shades: bool = True
     # --part-height auto: a vote's view whose box of a height explains it only with a side face as
     # bright as the top (or darker than the belt's level allows) counts against that height as if its
@@ -231,12 +232,17 @@ class TrackConfig:
     # The refinement starts from the vote's size held this tightly (1 sigma, mm: the vote's boxes agree
     # on it, while one view's fit with the height free slides along its valley), its height within this
     # fraction of the span of the voted height's neighbours (1 sigma). No view counts surer than
-    # view_height_sigma_mm (1 sigma; its sizes than size_sigma_mm); and the view that decides the vote
-    # tells the track its side shades only if its box is within view_height_sigma_mm of the height
-    # voted (with measure.learn_shades: the shades a box of another height needs are another part's).
+    # view_height_sigma_mm (1 sigma) of its height, nor than view_size_sigma_mm of its size: a view's
+    # size errs along its valley with its height, by 0.2-0.4 mm where its height errs by 0.5-1 (the
+    # tests' 20 mm box at 10 deg; held to 0.1, one view that a young estimate disagreed with on its
+    # length alone was left out, and the estimate settled 0.8 mm high). The view that decides the
+    # vote tells the track its side shades only if its box is within view_height_sigma_mm of the
+    # height voted (with measure.learn_shades: the shades a box of another height needs are another
+    # part's).
     start_shape_sigma_mm: float = 0.3
     start_height_span_fraction: float = 0.125
     view_height_sigma_mm: float = 0.5
+    view_size_sigma_mm: float = 0.15
     # A view that tells its own height (its size marginalised out) less surely than this (1 sigma, mm)
     # adds nothing to the estimate: it shows hardly any side face (near the middle of the view, a thin
     # part), so it tells the height only from the part's apparent size, which an edge bias of a

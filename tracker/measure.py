@@ -299,20 +299,17 @@ class Measurer:
             # 0.2-0.5 against a rendered 0.5-0.7, with the camera's or the textured model's blur).
             pose = fit(known.height_mm, size_prior=self._size_of(known), shade_prior=known.shades,
                        tell_shades=cfg.learn_shades and self._blur_px == 0)
-            if not known.refine:
-                return pose, ()
-            # What this view tells of the part's shape: fitted with the height free, height and size lent.
-            view = fit(known.height_mm, free_height=True, size_prior=self._size_of(known),
-                       height_prior=(known.height_mm, known.height_sigma_mm), shade_prior=known.shades)
-            if pose is None or view is None:
-                return pose, ()
-            return replace(pose, shape_info=view.shape_info, shape_vec=view.shape_vec), ()
+            return self._own_shape(pose, fit, known, known.height_mm), ()
         # Voted on, or new: at each height of height_starts_mm when the view votes, its pose at the
         # height leading the vote (a new part's: the height that fits it best).
         lead = None if known is None else known.leading_mm
         if (known is not None and not known.votes_at(rect.x_mm, rect.y_mm)) or self._votes_left <= 0:
-            # Between votes, or this frame's votes spent (a vote is several fits): at the leading height.
-            return (None if lead in (None, 0.0) else fit(lead)), ()
+            # Between votes, or this frame's votes spent (a vote is several fits): at the leading height,
+            # and what the view tells of the shape, kept until the vote decides (tracker/height.py).
+            if lead in (None, 0.0):
+                return None, ()
+            pose = fit(lead, shade_prior=known.shades, tell_shades=cfg.learn_shades and self._blur_px == 0)
+            return self._own_shape(pose, fit, known, lead), ()
         self._votes_left -= 1
         boxes, trials = self._trials(fit, rect, windows, cfg.height_starts_mm)
         if lead == 0.0 or not boxes:
@@ -329,6 +326,16 @@ class Measurer:
         # Its shades go to the track with learn_shades, which learns them from the view that decides its
         # vote on (if the vote chooses this box's height, to track.view_height_sigma_mm).
         return (box if cfg.learn_shades else replace(box, view_shades=None)), trials
+
+    def _own_shape(self, pose: BoxFit | None, fit, known: KnownPart, height_mm: float) -> BoxFit | None:
+        """``pose`` (a box of ``height_mm``) with what its view tells of the part's shape (when the track
+        wants it, ``known.refine``): fitted with the height free, the height (``known.height_sigma_mm``)
+        and size lent."""
+        if pose is None or not known.refine:
+            return pose
+        view = fit(height_mm, free_height=True, size_prior=self._size_of(known),
+                   height_prior=(height_mm, known.height_sigma_mm), shade_prior=known.shades)
+        return pose if view is None else replace(pose, shape_info=view.shape_info, shape_vec=view.shape_vec)
 
     def _trials(self, fit, rect: Rect, windows: EdgeWindows,
                 heights_mm: tuple[float, ...]) -> tuple[list[BoxFit], tuple[HeightTrial, ...]]:

@@ -13,8 +13,9 @@ wide enough tell its shade, and the track lends it to the rest, as it lends its 
 left out; and the oldest views weigh less than the newest (``track.shade_memory_views``): a face
 turning towards or away from a lamp changes its shade. With ``measure.learn_shades`` (on by
 default; the README says what it gains and costs), a track learns them from sharp images only: with
-the height given from every view, with --part-height auto once its part's height is voted on (see
-Track._learn_shades).
+the height given from every view, with --part-height auto from its boxes at the height it is
+estimated (or, while voted on, leads the vote) to have, forgotten when that moves by more than
+``track.view_height_sigma_mm`` (see Track._learn_shades).
 """
 
 from __future__ import annotations
