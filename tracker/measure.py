@@ -448,8 +448,9 @@ class KnownPart:
     y_mm: float
     # None: a young track's, whose size has not settled (it lends none; it is known for its vote).
     size: SizePrior | None
-    # --part-height auto (tracker/height.py). Its height once voted on, being refined (mm, 1 sigma;
-    # None: given, or still voted on), and whether this view is to tell its own too (a second fit).
+    # --part-height auto (tracker/height.py). Its height once voted on, being refined (mm; None: given,
+    # or still voted on), how surely it is known (1 sigma; while voted on, the leading height's:
+    # HeightEstimate.lead_sigma_mm), and whether this view is to tell its own too (a second fit).
     height_mm: float | None = None
     height_sigma_mm: float = math.inf
     refine: bool = True
@@ -460,8 +461,8 @@ class KnownPart:
     last_vote_mm: tuple[float, float] | None = None
     vote_step_mm: float = 0.0
     leading_mm: float | None = None
-    # Its height given, or being refined: the side shades its views have told (tracker/shades.py; None:
-    # none yet).
+    # Its height given, refined, or leading its vote: the side shades its views have told at that height
+    # (tracker/shades.py; None: none yet).
     shades: ShadePrior | None = None
 
     def votes_at(self, x_mm: float, y_mm: float) -> bool:
