@@ -354,6 +354,18 @@ def test_views_between_the_votes_fitted_at_another_height_are_left_out():
     assert not height.voting and height.height_mm == pytest.approx(20.0, abs=0.05)
 
 
+def test_a_view_measured_for_the_refinement_that_arrives_after_the_vote_is_held_again_is_ignored():
+    """A track's measurement is made for its state before the view: one measured for the refinement may
+    arrive in the frame the vote is held again (no height leads yet). It tells nothing to keep, and
+    neither fails nor leads the new vote (it did fail, a None lead, on random scenes)."""
+    cfg, height = _voted_20_mm()
+    for k in range(cfg.view_gate_frames):
+        height.add(_refining_view(30.0 + 5.0 * k), 0.0, 0.0)
+    assert height.voting and height.leading_mm is None
+    height.add(_refining_view(20.0), 0.0, 0.0)
+    assert height.voting and height.leading_mm is None and height._between_votes == []
+
+
 def test_a_refined_height_converges_only_after_enough_views():
     """However sure each view says it is, the height converges only after track.height_converged_views
     views have told it (one view's certainty says how well it fits, not whether the fit is right)."""
