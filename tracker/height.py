@@ -124,6 +124,7 @@ class HeightEstimate:
         self._last_vote_mm: np.ndarray | None = None  # where the part was at the last vote
         self._between_votes: list[tuple[float, np.ndarray, np.ndarray]] = []  # what views between votes told (see add)
         self._lead: tuple[float, np.ndarray] | None = None  # the leading height and its size (see _between)
+        self._lead_tried = 0  # the index of the height tried it lies near (the best scoring)
         # The refinement: the information on (length, width, height) and its vector, the vote's (its
         # start) and that of every view that tells the height (see _robust_sum).
         self._info: np.ndarray | None = None
@@ -186,12 +187,12 @@ class HeightEstimate:
     @property
     def lead_sigma_mm(self) -> float:
         """How surely the vote's lead tells the height (1 sigma, mm): a fraction
-        (track.start_height_span_fraction) of the span of the heights tried either side of the height
-        tried nearest to it, at least track.start_shape_sigma_mm; inf before any view."""
+        (track.start_height_span_fraction) of the span of the neighbours of the height tried it lies
+        near (the best scoring: halfway between two, it is that one's), at least
+        track.start_shape_sigma_mm; inf before any view."""
         if self._lead is None:
             return math.inf
-        heights = np.array(self.heights_mm)
-        k = int(np.argmin(np.abs(heights - self._lead[0])))
+        heights, k = np.array(self.heights_mm), self._lead_tried
         span = float(heights[min(k + 1, len(heights) - 1)] - heights[max(k - 1, 0)])
         return max(span * self._cfg.start_height_span_fraction, self._cfg.start_shape_sigma_mm)
 
@@ -276,7 +277,8 @@ class HeightEstimate:
         # Their variances: the view's own, and no less than the floor.
         self._size_vars.append(np.array([t.size_var_mm2 for t in trials]) + self._cfg.height_vote_size_sigma_mm**2)
         scores = self._scores()
-        self._lead = self._between(int(np.argmin(scores)))
+        self._lead_tried = int(np.argmin(scores))
+        self._lead = self._between(self._lead_tried)
         votes = len(self._excess)
         lead_by = self._rivals(scores, self._lead[0]).min(initial=np.inf) - scores.min()
         if votes >= self._cfg.height_vote_views or (
@@ -358,8 +360,7 @@ class HeightEstimate:
         return sizes, weights, _weighted_mean(sizes, weights)
 
     def _decide(self) -> None:
-        heights = np.array(self.heights_mm)
-        k = int(np.argmin(self._scores()))
+        heights, k = np.array(self.heights_mm), self._lead_tried  # the best scoring, as the vote just scored
         if heights[k] == 0:
             self.flat = True
             return
