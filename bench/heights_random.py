@@ -79,16 +79,20 @@ def measure_scene(k: int, any_height: bool = False) -> dict:
         summary = given.summary()
         row |= {"given_mean_mm": summary["centroid_mean_mm"], "given_p95_mm": summary["centroid_p95_mm"]}
     frames_own = own_track(part_views(_run(spec, frames, MeasureConfig(estimate_height=True)), truths, 0))
-    if not frames_own:
-        return row | {"converged": None}
+    return row | auto_row(frames_own, part.height_mm)
+
+
+def auto_row(frames_own: list[tuple[dict, dict]], height_mm: float) -> dict:
+    """How a part's own track (its (pose, truth) pairs) met the bounds with auto: when its height
+    converged (a fraction of its frames; None: never), and its errors after and before."""
     converged = [i for i, (o, _) in enumerate(frames_own) if o["height_converged"]]
     if not converged:
-        return row | {"converged": None}
+        return {"converged": None}
     first = converged[0]
     after = frames_own[first:]
-    return row | {
+    return {
         "converged": first / len(frames_own),
-        "height_max_mm": max(abs(o["height_mm"] - part.height_mm) for o, _ in after),
+        "height_max_mm": max(abs(o["height_mm"] - height_mm) for o, _ in after),
         "centroid_after_mm": float(np.mean([centroid_error_mm(o, t) for o, t in after])),
         "centroid_before_mm": (float(np.mean([centroid_error_mm(o, t) for o, t in frames_own[:first]]))
                                if first else 0.0),
