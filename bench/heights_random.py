@@ -61,7 +61,8 @@ def scene(k: int, any_height: bool = False) -> SceneSpec:
                      supersample=8, blur_samples=3, belt_level=float(rng.uniform(50, 80)), seed=k)
 
 
-def _run(spec: SceneSpec, frames: list, measure: MeasureConfig) -> list[dict]:
+def poses_of(spec: SceneSpec, frames: list, measure: MeasureConfig) -> list[dict]:
+    """The pose stream (as dicts) of rendered ``frames`` of ``spec`` measured with ``measure``."""
     pipeline = Pipeline(Renderer(spec).calibration, TrackerConfig(measure=measure))
     return [pipeline.process(i, image, spec.t_ns(i)).to_dict() for i, (image, _) in enumerate(frames)]
 
@@ -75,10 +76,10 @@ def measure_scene(k: int, any_height: bool = False) -> dict:
     row = {"scene": k, "height_mm": part.height_mm, "tilt_deg": spec.camera.tilt_deg,
            "side_contrast": round(part.intensity * 0.65 - spec.belt_level, 1)}
     if part.height_mm > 0:
-        given = evaluate(_run(spec, frames, MeasureConfig(part_height_mm=part.height_mm)), truths, skip_first=2)
+        given = evaluate(poses_of(spec, frames, MeasureConfig(part_height_mm=part.height_mm)), truths, skip_first=2)
         summary = given.summary()
         row |= {"given_mean_mm": summary["centroid_mean_mm"], "given_p95_mm": summary["centroid_p95_mm"]}
-    frames_own = own_track(part_views(_run(spec, frames, MeasureConfig(estimate_height=True)), truths, 0))
+    frames_own = own_track(part_views(poses_of(spec, frames, MeasureConfig(estimate_height=True)), truths, 0))
     return row | auto_row(frames_own, part.height_mm)
 
 
@@ -112,6 +113,12 @@ def missed(row: dict) -> list[str]:
     return out + [name for name, miss in checks if miss]
 
 
+def row_line(row: dict, misses: list[str]) -> str:
+    """A row as printed: its figures to 3 decimals, then the bounds it missed."""
+    shown = {key: round(value, 3) if isinstance(value, float) else value for key, value in row.items()}
+    return f"{json.dumps(shown)} -> {', '.join(misses) or 'every bound met'}"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", type=int, default=30)
@@ -129,8 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     for row in rows:
         misses = missed(row)
         tally.update(misses)
-        shown = {key: round(value, 3) if isinstance(value, float) else value for key, value in row.items()}
-        print(json.dumps(shown), "->", ", ".join(misses) or "every bound met")
+        print(row_line(row, misses))
     print(f"{sum(not missed(r) for r in rows)} of {len(rows)} scenes met every bound; missed: {dict(tally)}")
     return 0
 

@@ -23,11 +23,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from heights_random import auto_row, missed  # noqa: E402
+from heights_random import auto_row, missed, poses_of, row_line  # noqa: E402
 
-from tracker.config import MeasureConfig, TrackerConfig  # noqa: E402
+from tracker.config import MeasureConfig  # noqa: E402
 from tracker.evaluate import evaluate, own_track, part_views  # noqa: E402
-from tracker.pipeline import Pipeline  # noqa: E402
 from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec  # noqa: E402
 
 SPEED_MM_S = 300.0
@@ -64,11 +63,6 @@ SCENES = {
 }
 
 
-def _poses(spec: SceneSpec, frames: list, measure: MeasureConfig) -> list[dict]:
-    pipeline = Pipeline(Renderer(spec).calibration, TrackerConfig(measure=measure))
-    return [pipeline.process(i, image, spec.t_ns(i)).to_dict() for i, (image, _) in enumerate(frames)]
-
-
 def measure_scene(name: str) -> list[dict]:
     """One row per part of scene ``name``."""
     spec = SCENES[name]()
@@ -76,11 +70,11 @@ def measure_scene(name: str) -> list[dict]:
     frames = [renderer.render(i) for i in range(spec.n_frames)]
     truths = [t for _, t in frames]
     rows = []
-    auto = _poses(spec, frames, MeasureConfig(estimate_height=True))
+    auto = poses_of(spec, frames, MeasureConfig(estimate_height=True))
     for k, part in enumerate(spec.parts):
         row = {"scene": name, "part": k, "height_mm": part.height_mm}
         if len(spec.parts) == 1:
-            given = evaluate(_poses(spec, frames, MeasureConfig(part_height_mm=part.height_mm)), truths,
+            given = evaluate(poses_of(spec, frames, MeasureConfig(part_height_mm=part.height_mm)), truths,
                              skip_first=2).summary()
             row |= {"given_mean_mm": given["centroid_mean_mm"], "given_p95_mm": given["centroid_p95_mm"],
                     "given_angle_deg": given["angle_mean_deg"]}
@@ -102,8 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(rows, indent=1))
         return 0
     for row in rows:
-        shown = {key: round(value, 3) if isinstance(value, float) else value for key, value in row.items()}
-        print(json.dumps(shown), "->", ", ".join(_missed(row)) or "every bound met")
+        print(row_line(row, _missed(row)))
     print(f"{sum(not _missed(r) for r in rows)} of {len(rows)} parts met every bound")
     return 0
 
