@@ -110,19 +110,27 @@ def _converged_error_mm(frames: list[tuple[dict, dict]], height_mm: float) -> tu
     return converged[0] / len(frames), max(abs(o["height_mm"] - height_mm) for o, _ in frames[converged[0]:])
 
 
-def test_learnt_shades_bring_a_thin_box_within_the_bounds():
-    """measure.learn_shades: the tests' 10 mm box at 10 deg, whose height comes out 2.5 mm off once
-    converged without (its views' slivers of side face read wherever their fits started; 0.18 mm before
-    the heights tried were made denser on 2026-12-02, 1.4 mm when the scene was rendered with 4x4
-    samples per edge pixel), converges within the first third of its crossing and within the issue's
-    0.5 mm (measured: after 26 %, 0.28 mm; 0.07 mm before the denser heights). The view that decides
-    its vote is the first to tell them (0.48 mm when the refinement's views were), with the vote's
-    shade check (measure.vote_on_shades) on or off."""
-    share, error = _converged_error_mm(_auto(10, 10, learn_shades=True), 10)
-    _, error_unchecked = _converged_error_mm(_auto(10, 10, learn_shades=True, vote_on_shades=False), 10)
-    _, error_without = _converged_error_mm(_auto(10, 10, learn_shades=False), 10)
-    assert share <= 1 / 3 and error <= 0.5 and error_unchecked <= 0.5, (share, error, error_unchecked)
-    assert error_without > 2 * error, (error_without, error)
+def _centroid_mean_mm(frames: list[tuple[dict, dict]]) -> float:
+    return float(np.mean([math.dist((o["x_mm"], o["y_mm"]), (t["x_mm"], t["y_mm"])) for o, t in frames]))
+
+
+def test_learnt_shades_place_a_thin_box_its_height_told_without_them():
+    """measure.learn_shades with --part-height auto: the tests' 5 mm box at 10 deg. Its pose (a box of
+    the estimated height) is fitted with the shades its views told lent, and is the better for them:
+    measured 0.036 mm centroid mean over its crossing, 0.055 without (0.19 and 0.25 mm before its height
+    converged). Its height is read from each view's own fit, which is lent nothing: within the issue's
+    bounds either way (measured: converged after 10 %, 0.17 mm; until the fit held the windows of its
+    model's own errors and lent nothing, 2.5 mm off without the shades and 0.28 with them, the 10 mm
+    box at 10 deg). The vote's shade check (measure.vote_on_shades) on or off."""
+    learnt = _auto(5, 10, learn_shades=True)
+    share, error = _converged_error_mm(learnt, 5)
+    _, error_unchecked = _converged_error_mm(_auto(5, 10, learn_shades=True, vote_on_shades=False), 5)
+    without = _auto(5, 10, learn_shades=False)
+    share_without, error_without = _converged_error_mm(without, 5)
+    assert max(share, share_without) <= 1 / 3, (share, share_without)
+    assert max(error, error_unchecked, error_without) <= 0.5, (error, error_unchecked, error_without)
+    assert _centroid_mean_mm(learnt) < 0.8 * _centroid_mean_mm(without), (_centroid_mean_mm(learnt),
+                                                                         _centroid_mean_mm(without))
 
 
 def _outside_counts(height_mm: float, tilt_deg: float) -> tuple[int, dict[float, int]]:

@@ -198,9 +198,6 @@ class TrackConfig:
     size_sigma_mm: float = 0.1
     # The least uncertainty (1 sigma, mm) a track's size is lent to a box's fit with (see measure.sum_sigma_px).
     known_size_sigma_mm: float = 0.02
-    # ... and a track's estimated height (--part-height auto), 1 sigma mm: loose enough that a view
-    # still tells its own height (taken back out of the fit), tight enough to keep the fit near.
-    known_height_sigma_mm: float = 0.2
     # With measure.learn_shades, a box's side shades as its track's views tell them together
     # (tracker/shades.py): lent to each fit no surer than known_shade_sigma (1 sigma, a fraction of
     # the top's contrast; weighed as the size is, see measure.sum_sigma_px); a view counts no surer

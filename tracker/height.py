@@ -21,8 +21,9 @@ size. The estimate has two stages.
    (to ``track.height_vote_resolution_mm``), and starts the refinement if its height wins. Meanwhile
    a view's pose is its box at the leading height.
 2. **Refine.** Otherwise each later view is measured as a box of the estimated height, its size lent
-   (its pose), and fitted once more with the height free, the part's shape lent: what that view tells
-   of (length, width, height) on its own (``boxfit.view_information``) adds to the estimate. A view
+   (its pose), and fitted once more from there with its height and size free, nothing lent (lent the
+   track's size, a view reads back the height it is lent): what that view tells of (length, width,
+   height) on its own (``boxfit.view_information``) adds to the estimate. A view
    that tells the height alone (its size marginalised out) less surely than
    ``track.view_height_told_sigma_mm`` adds nothing to it: it shows hardly any side face, and tells the
    height only from the part's apparent size, which the same small bias of the edges moves by
@@ -30,9 +31,9 @@ size. The estimate has two stages.
    vote's start and the views that tell the height, less those that disagree beyond
    ``track.view_gate_chi2`` with what the start and the rest tell (a hand over the part, a fit gone
    astray; see _robust_sum): one the estimate let in while young is left out once the views after it
-   disagree with it. The views between the votes are fitted so too, at the leading height and with the
-   side shades the track learns there; those fitted at the height that wins refine the estimate when the
-   vote decides, as if they came then (see _replay_between_votes). A view that disagrees with the
+   disagree with it. The views between the votes are fitted so too, from the leading height; those
+   fitted from the height that wins refine the estimate when the vote decides, as if they came then
+   (see _replay_between_votes). A view that disagrees with the
    estimate counts as disagreeing; views that keep disagreeing for ``track.view_gate_frames`` views
    start the vote again (meanwhile the height told is the one voted on again). The height has converged
    once its uncertainty is below ``track.height_converged_sigma_mm`` over
@@ -378,12 +379,11 @@ class HeightEstimate:
         self._replay_between_votes(height)
 
     def _replay_between_votes(self, height_mm: float) -> None:
-        """The views between the votes, fitted at the leading height ``height_mm`` (within
+        """The views between the votes, fitted from the leading height ``height_mm`` (within
         track.view_height_sigma_mm), refine the estimate as if they came now: a part crossing the view
         quickly would otherwise converge only after as many views more. Where they move it farther than
-        that from the box they were fitted as (its side shades lent that box's; the tests' 8 mm box
-        among two parts, its vote won at 10 mm: 8.5 mm, sure to 0.2), they do not count towards its
-        convergence: the views fitted at the estimate itself decide that."""
+        that from the height they were fitted from, they do not count towards its convergence: the views
+        fitted from the estimate itself decide that."""
         for lead_mm, info, vec in self._between_votes:
             if self._info is None:
                 break  # they disagreed so that it is voted again

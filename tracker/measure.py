@@ -328,13 +328,14 @@ class Measurer:
         return (box if cfg.learn_shades else replace(box, view_shades=None)), trials
 
     def _own_shape(self, pose: BoxFit | None, fit, known: KnownPart, height_mm: float) -> BoxFit | None:
-        """``pose`` (a box of ``height_mm``) with what its view tells of the part's shape (when the track
-        wants it, ``known.refine``): fitted with the height free, the height (``known.height_sigma_mm``)
-        and size lent."""
+        """``pose`` (a box of ``height_mm``) with what its view tells of the part's shape on its own (when
+        the track wants it, ``known.refine``): fitted again from that height with the height and size
+        free, nothing lent. Lent the track's size, a view reads the height it is lent (the size a
+        height needs holds the height where they trade: a 15 mm box's views lent 13.6 mm read 13.5,
+        lent 16.5 read 16.0); lent the side shades learnt at a wrong height, likewise."""
         if pose is None or not known.refine:
             return pose
-        view = fit(height_mm, free_height=True, size_prior=self._size_of(known),
-                   height_prior=(height_mm, known.height_sigma_mm), shade_prior=known.shades)
+        view = fit(height_mm, free_height=True, keep_model_errors=True)
         return pose if view is None else replace(pose, shape_info=view.shape_info, shape_vec=view.shape_vec)
 
     def _trials(self, fit, rect: Rect, windows: EdgeWindows,
@@ -349,7 +350,8 @@ class Measurer:
         # parts on a knurled belt led at 2.5-10 mm for most of their crossing: 0.64 mm off, 0.37 with
         # each fit's own RMS).
         sharp = self._blur_px == 0
-        fits = [(h, fit(h, tell_shades=tell and h > 0, keep_residuals=sharp)) for h in heights_mm]
+        fits = [(h, fit(h, tell_shades=tell and h > 0, keep_residuals=sharp, keep_model_errors=True))
+                for h in heights_mm]
         boxes = [f for _, f in fits if f is not None]
         if not boxes:
             return [], ()
@@ -449,10 +451,8 @@ class KnownPart:
     # None: a young track's, whose size has not settled (it lends none; it is known for its vote).
     size: SizePrior | None
     # --part-height auto (tracker/height.py). Its height once voted on, being refined (mm; None: given,
-    # or still voted on), how surely it is known (1 sigma; while voted on, the leading height's:
-    # HeightEstimate.lead_sigma_mm), and whether this view is to tell its own too (a second fit).
+    # or still voted on), and whether this view is to tell its own too (a second fit).
     height_mm: float | None = None
-    height_sigma_mm: float = math.inf
     refine: bool = True
     # Found flat: measured as flat, no box fitted.
     flat: bool = False

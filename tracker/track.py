@@ -206,17 +206,15 @@ class Track:
         if self.height.voting:
             return KnownPart(float(x[X]), float(x[Y]), size, last_vote_mm=self.height.last_vote_mm,
                              vote_step_mm=cfg.height_vote_step_mm, leading_mm=self.height.leading_mm,
-                             height_sigma_mm=self.height.lead_sigma_mm,
                              shades=None if self.shades is None else self.shades.prior())
         # Being refined: the size and height as the track's views tell them together.
         (length, width, _), cov = self.height.shape()
-        sigma = np.sqrt(np.maximum(np.diag(cov), [cfg.known_size_sigma_mm**2] * 2 + [cfg.known_height_sigma_mm**2]))
+        sigma = np.sqrt(np.maximum(np.diag(cov)[:2], cfg.known_size_sigma_mm**2))
         if width > length:
             length, width = width, length
-            sigma = sigma[[1, 0, 2]]
+            sigma = sigma[::-1]
         size = SizePrior(float(length), float(width), float(sigma[0]), float(sigma[1]))
-        return KnownPart(float(x[X]), float(x[Y]), size, self.height.height_mm, float(sigma[2]),
-                         refine=self.height.wants_refine,
+        return KnownPart(float(x[X]), float(x[Y]), size, self.height.height_mm, refine=self.height.wants_refine,
                          shades=None if self.shades is None else self.shades.prior())
 
     def _normalise(self) -> None:
