@@ -119,9 +119,10 @@ def test_learnt_shades_place_a_thin_box_its_height_told_without_them():
     the estimated height) is fitted with the shades its views told lent, and is the better for them:
     measured 0.036 mm centroid mean over its crossing, 0.055 without (0.19 and 0.25 mm before its height
     converged). Its height is read from each view's own fit, which is lent nothing: within the issue's
-    bounds either way (measured: converged after 10 %, 0.17 mm; until the fit held the windows of its
-    model's own errors and lent nothing, 2.5 mm off without the shades and 0.28 with them, the 10 mm
-    box at 10 deg). The vote's shade check (measure.vote_on_shades) on or off."""
+    bounds either way (measured: converged after 10 %, 0.17 mm). Until the eleventh session those fits
+    were lent the learnt shades (and dropped the windows of the model's own errors): the 10 mm box at
+    10 deg came out 2.5 mm off without them, 0.28 with them. The vote's shade check
+    (measure.vote_on_shades) on or off."""
     learnt = _auto(5, 10, learn_shades=True)
     share, error = _converged_error_mm(learnt, 5)
     _, error_unchecked = _converged_error_mm(_auto(5, 10, learn_shades=True, vote_on_shades=False), 5)
