@@ -338,17 +338,19 @@ class PlcWriter:
             return False
         latency_ms = (time.perf_counter_ns() - t0) / 1e6
         self._builder.commit(prepared)
-        s = self.stats
-        s.writes += 1
-        s.poses_written += prepared.new_pose
-        s.last_latency_ms = latency_ms
-        s.max_latency_ms = max(s.max_latency_ms, latency_ms)
-        if prepared.new_pose and pose is not None and pose.arrival_ns:
-            s.capture_to_register_ns.append(self._clock_ns() - pose.arrival_ns)
         if self.state == REJECTED:
             log.info("PLC %s: writes accepted again", self.link.name)
             self._reject_code = None
+        s = self.stats
+        s.last_latency_ms = latency_ms
+        # The link is "ok" before the write is counted: whoever reads the count (another thread) then
+        # reads the status as ok too (a test saw 1 write and "PLC connecting" on a busy machine).
         self._acknowledged()
+        s.writes += 1
+        s.poses_written += prepared.new_pose
+        s.max_latency_ms = max(s.max_latency_ms, latency_ms)
+        if prepared.new_pose and pose is not None and pose.arrival_ns:
+            s.capture_to_register_ns.append(self._clock_ns() - pose.arrival_ns)
         self._write_queue(entries)
         return True
 
