@@ -30,6 +30,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/heights_random.py
 	$(BIN)/python bench/heights_random.py --any-height
 	$(BIN)/python bench/issue_scenes.py
+	$(BIN)/python bench/view_heights.py
 
 # Remakes the bundled demo recording (the same bytes for the same software: no wall-clock time in it).
 demo: $(STAMP)
