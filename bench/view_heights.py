@@ -26,6 +26,7 @@ import numpy as np  # noqa: E402
 from heights import box_scene  # noqa: E402
 
 from tracker.config import MeasureConfig, TrackConfig, TrackerConfig  # noqa: E402
+from tracker.height import _height_information  # noqa: E402
 from tracker.measure import KnownPart  # noqa: E402
 from tracker.pipeline import Pipeline  # noqa: E402
 from tracker.synthetic import Renderer  # noqa: E402
@@ -53,11 +54,10 @@ def view_errors(height_mm: float, tilt_deg: float) -> dict:
             m = min(found, key=lambda f: np.hypot(f.rect.x_mm - part["x_mm"], f.rect.y_mm - part["y_mm"]),
                     default=None)
             if m is not None and not m.clipped and m.shape_info is not None:
-                info = m.shape_info
                 # The height alone, the size marginalised out (as the track judges a view).
-                height_info = info[2, 2] - info[2, :2] @ np.linalg.lstsq(info[:2, :2], info[:2, 2], rcond=None)[0]
+                height_info = _height_information(m.shape_info)
                 if height_info >= told_sigma_mm**-2:
-                    errors.append(float(np.linalg.solve(info, m.shape_vec)[2]) - height_mm)
+                    errors.append(float(np.linalg.solve(m.shape_info, m.shape_vec)[2]) - height_mm)
                     sigmas.append(float(height_info**-0.5))
         pipeline.process(i, image, scene.t_ns(i))
     err, sig = np.abs(errors), np.array(sigmas)
