@@ -12,11 +12,12 @@ import numpy as np
 import pytest
 from conftest import BOX_SUPERSAMPLE, rendered, run_pipeline
 
-from tracker.box import EdgeWindows, lengths_in_faces
+from tracker.box import SIDE_X, SIDE_Y, TOP, BoxCamera, EdgeWindows, lengths_in_faces
 from tracker.boxfit import SizePrior, _best_shades
 from tracker.cli import main
 from tracker.config import MeasureConfig, TrackerConfig
 from tracker.evaluate import evaluate
+from tracker.geometry import rectangle_corners
 from tracker.measure import KnownPart
 from tracker.pipeline import Pipeline
 from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec
@@ -95,6 +96,36 @@ def test_window_lengths_in_a_face_are_exact():
     windows = EdgeWindows(np.array([[2.5, 5.0]]), np.array([[-f, 0.0]]), np.zeros(1), 6.0, (1.0, 2.0))
     share = lengths_in_faces(windows, slanted)[1][0, 0, 0]
     assert share == pytest.approx(0.6, abs=1e-9)
+
+
+def test_a_box_shows_its_top_and_the_sides_that_face_the_camera():
+    """The compiled face model (box.BoxCamera.faces) against the corners projected plainly: a camera 800 mm
+    straight above the belt's origin sees, of a box off to its -x and +y, the two sides that face it (the
+    +x end and the -y long side), whatever the box's turn of 90 deg says about which side is which; and
+    nothing but its top where it stands right under the camera."""
+    spec = CameraSpec(width=480, height=360, focal_px=420.0, tilt_deg=0.0, yaw_deg=0.0, height_mm=800.0,
+                      principal_offset_px=(0.0, 0.0))
+    camera = BoxCamera(Renderer(SceneSpec(spec, (), n_frames=1)).calibration)
+    for angle_deg, kinds in ((0.0, {SIDE_X, SIDE_Y}), (90.0, {SIDE_X, SIDE_Y}), (-60.0, {SIDE_X, SIDE_Y})):
+        params = np.array([[-150.0, 120.0, angle_deg, 80.0, 50.0, 20.0], [-150.5, 120.0, angle_deg, 80.0, 50.0, 20.0]])
+        polygons, seen = camera.faces(params)
+        assert seen[0] == TOP and set(seen[1:]) == kinds and len(seen) == 3
+        for p, box in enumerate(params):
+            foot = rectangle_corners(*box[:5])
+            corners = camera.project(np.vstack([np.c_[foot, np.zeros(4)], np.c_[foot, np.full(4, -box[5])]]))
+            assert np.allclose(polygons[p, 0], corners[4:], atol=1e-12)  # the top, Z = -height
+            for face, kind in zip(polygons[p, 1:], seen[1:], strict=True):
+                # A side: two footprint corners, then the two top corners above them.
+                bottom = [int(np.argmin(np.abs(corners[:4] - c).sum(axis=1))) for c in face[:2]]
+                assert np.allclose(face[:2], corners[bottom], atol=1e-12)
+                assert np.allclose(face[2:], corners[[4 + bottom[1], 4 + bottom[0]]], atol=1e-12)
+                # Corners 0-1 and 2-3 run along the length: that side faces the part's y.
+                assert kind == (SIDE_Y if min(bottom) % 2 == 0 and bottom != [3, 0] else SIDE_X)
+                # It faces the camera: its outward normal (footprint counter-clockwise) points towards the nadir.
+                a, b = foot[bottom[0]], foot[bottom[1]]
+                assert np.dot(-a, [b[1] - a[1], a[0] - b[0]]) > 0
+    polygons, seen = camera.faces(np.array([[0.0, 0.0, 30.0, 80.0, 50.0, 20.0]]))
+    assert list(seen) == [TOP] and polygons.shape == (1, 1, 4, 2)
 
 
 def test_side_shades_are_solved_from_the_sums():

@@ -24,7 +24,6 @@ import cv2
 import numpy as np
 
 from tracker.calibration import Calibration
-from tracker.geometry import rectangle_corners
 
 # Face kinds: the top, the sides facing the part's own x (its ends) and those facing its y.
 TOP, SIDE_X, SIDE_Y = 0, 1, 2
@@ -67,8 +66,8 @@ class BoxCamera:
     """Projects belt-frame points (mm; Z into the belt, so a top face h high is at Z = -h)."""
 
     def __init__(self, calibration: Calibration) -> None:
-        self.rotation = calibration.rotation()
-        self.translation = np.asarray(calibration.belt_tvec, dtype=np.float64).reshape(3)
+        self.rotation = np.ascontiguousarray(calibration.rotation(), dtype=np.float64)
+        self.translation = np.ascontiguousarray(calibration.belt_tvec, dtype=np.float64).reshape(3)
         # The camera's foot on the belt: a side face is seen from the side of its plane this is on.
         self.nadir_mm = (-self.rotation.T @ self.translation)[:2]
 
@@ -80,14 +79,13 @@ class BoxCamera:
         """The 8 corners' normalised images: footprint first (counter-clockwise), then the top face."""
         return self._corner_images(np.array([[*params[:5], height_mm]]))[0]
 
-    def _corner_images(self, params: np.ndarray, footprints: np.ndarray | None = None) -> np.ndarray:
-        """The 8 corners' images of each box (P rows of x, y, angle, length, width, height): (P, 8, 2);
-        ``footprints``: their footprints' corners (P, 4, 2), if already at hand."""
-        world = np.zeros((len(params), 8, 3))
-        world[:, :4, :2] = world[:, 4:, :2] = _footprints(params) if footprints is None else footprints
-        world[:, 4:, 2] = -params[:, 5:6]
-        cam = world @ self.rotation.T + self.translation
-        return cam[..., :2] / cam[..., 2:3]
+    def _corner_images(self, params: np.ndarray) -> np.ndarray:
+        """The 8 corners' images of each box (P rows of x, y, angle, length, width, height): (P, 8, 2)."""
+        from tracker.facecover import corner_images  # noqa: PLC0415 (compiled: see lengths_in_faces)
+
+        out = np.empty((len(params), 8, 2))
+        corner_images(np.ascontiguousarray(params, dtype=np.float64), self.rotation, self.translation, out)
+        return out
 
     def outlines(self, params: np.ndarray) -> list[np.ndarray]:
         """The silhouette polygon of each box (P rows of x, y, angle, length, width, height)."""
@@ -100,26 +98,10 @@ class BoxCamera:
         """The faces the camera sees of each box (P rows of x, y, angle, length, width, height): their
         polygons (P, F, 4, 2) in normalised coordinates and kinds (F,). Which faces are seen is decided
         on the first box (the others are its small variations: a Jacobian's)."""
-        params = np.atleast_2d(params)
-        footprints = _footprints(params)
-        pts = self._corner_images(params, footprints)
-        faces, kinds = [[4, 5, 6, 7]], [TOP]
-        if params[0, 5] > 0:
-            foot = footprints[0]
-            for i in range(4):
-                a, b = foot[i], foot[(i + 1) % 4]
-                outward = np.array([b[1] - a[1], a[0] - b[0]])  # the footprint is counter-clockwise
-                if float(np.dot(self.nadir_mm - a, outward)) > 0:
-                    j = (i + 1) % 4
-                    faces.append([i, j, 4 + j, 4 + i])
-                    # Sides 0 and 2 run along the length: they face the part's y.
-                    kinds.append(SIDE_Y if i % 2 == 0 else SIDE_X)
-        return pts[:, np.array(faces)], np.array(kinds)
+        from tracker.facecover import box_faces  # noqa: PLC0415 (compiled: see lengths_in_faces)
 
-
-def _footprints(params: np.ndarray) -> np.ndarray:
-    """rectangle_corners of each row's (x, y, angle, length, width): (P, 4, 2), counter-clockwise."""
-    return rectangle_corners(*params[:, :5].T)
+        params = np.ascontiguousarray(np.atleast_2d(params), dtype=np.float64)
+        return box_faces(params, self.rotation, self.translation, self.nadir_mm)
 
 
 def distances_to_outline(points: np.ndarray, outline: np.ndarray) -> np.ndarray:
@@ -161,3 +143,6 @@ def compile_model() -> None:
     lengths_in_faces(windows, square)
     lengths_in_faces(replace(windows, blur_px=1.0), square)  # the blurred path is compiled apart
     distances_to_outline(np.zeros((1, 2)), square[0, 0])
+    from tracker.facecover import box_faces  # noqa: PLC0415
+
+    box_faces(np.array([[0.0, 0.0, 0.0, 2.0, 1.0, 1.0]]), np.eye(3), np.array([0.0, 0.0, 10.0]), np.zeros(2))

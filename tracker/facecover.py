@@ -1,9 +1,14 @@
-"""The compiled heart of the box model (tracker/box.py): how much of each edge window, and of its
-level pixel, each face of a box covers; and how far edge points lie from a box's outline.
+"""The compiled heart of the box model (tracker/box.py): where a box's corners and the faces the
+camera sees project; how much of each edge window, and of its level pixel, each face covers; and how
+far edge points lie from a box's outline.
 
 The box fit evaluates this a few hundred windows x 3 faces x 7 boxes per Jacobian, tens of times
 per part and frame; in numpy's whole-array steps that cost 16 ms per part and frame at 560x420,
-compiled (numba) a fraction of it. Plain loops over plain arrays, nothing else.
+compiled (numba) a fraction of it. The faces' projection too: in numpy, a few small arrays per
+call, it cost 65 us per Jacobian's 7 boxes against 4 compiled; with it and the level pixels that lie
+wholly inside or outside a face read without cutting them, one vote frame's box fits took 0.55-0.6 of
+their time before (2026-12-03, the 65 fits of one 20 mm box's first 30 frames: 525-540 ms -> 296-339). Plain loops
+over plain arrays, nothing else.
 """
 
 from __future__ import annotations
@@ -61,6 +66,19 @@ def clip(polygons, inner, step, span, level_from, level_to, blur, total, level):
                     s_across = -0.5 if c < 2 else 0.5
                     square[c, 0] = qx + s_along * dx - s_across * dy
                     square[c, 1] = qy + s_along * dy + s_across * dx
+                # Most level pixels lie wholly inside a face or wholly outside one of its edges: no cut.
+                inside, outside = True, False
+                for k in range(4):
+                    below = above = 0
+                    for c in range(4):
+                        d = normal[k, 0] * square[c, 0] + normal[k, 1] * square[c, 1] - offset[k]
+                        below += d <= 0
+                        above += d >= 0
+                    inside = inside and below == 4
+                    outside = outside or above == 4
+                if inside or outside:
+                    level[p, n, f] = 1.0 if inside else 0.0
+                    continue
                 for k in range(4):
                     count = _cut(square, spare, count, normal[k, 0], normal[k, 1], offset[k])
                     square, spare = spare, square
@@ -207,3 +225,64 @@ def shaded_sums(total, level, kinds, covered, shades, solve, start, prior, low, 
         for n in range(n_win):
             out_sums[p, n] = ((t[n, 0] + t[n, 1] * s1 + t[n, 2] * s2)
                               / max(lv[n, 0] + lv[n, 1] * s1 + lv[n, 2] * s2, min_level))
+
+
+@numba.njit(cache=True)
+def _footprint(params, p, out):  # pragma: no cover (compiled)
+    """Fills ``out`` (4, 2) with box ``p``'s footprint corners, counter-clockwise (as
+    geometry.rectangle_corners)."""
+    x, y, a = params[p, 0], params[p, 1], math.radians(params[p, 2])
+    ux, uy = math.cos(a) * params[p, 3] / 2, math.sin(a) * params[p, 3] / 2
+    vx, vy = -math.sin(a) * params[p, 4] / 2, math.cos(a) * params[p, 4] / 2
+    out[0, 0], out[0, 1] = x - ux - vx, y - uy - vy
+    out[1, 0], out[1, 1] = x + ux - vx, y + uy - vy
+    out[2, 0], out[2, 1] = x + ux + vx, y + uy + vy
+    out[3, 0], out[3, 1] = x - ux + vx, y - uy + vy
+
+
+@numba.njit(cache=True)
+def corner_images(params, rotation, translation, out):  # pragma: no cover (compiled)
+    """Fills ``out`` (P, 8, 2) with the normalised images of each box's 8 corners (P rows of x, y,
+    angle, length, width, height): its footprint counter-clockwise, then its top (Z = -height)."""
+    foot = np.empty((4, 2))
+    for p in range(params.shape[0]):
+        _footprint(params, p, foot)
+        for k in range(8):
+            wx, wy = foot[k % 4, 0], foot[k % 4, 1]
+            wz = 0.0 if k < 4 else -params[p, 5]
+            cx = rotation[0, 0] * wx + rotation[0, 1] * wy + rotation[0, 2] * wz + translation[0]
+            cy = rotation[1, 0] * wx + rotation[1, 1] * wy + rotation[1, 2] * wz + translation[1]
+            cz = rotation[2, 0] * wx + rotation[2, 1] * wy + rotation[2, 2] * wz + translation[2]
+            out[p, k, 0], out[p, k, 1] = cx / cz, cy / cz
+
+
+@numba.njit(cache=True)
+def box_faces(params, rotation, translation, nadir):  # pragma: no cover (compiled)
+    """The faces the camera sees of each box (see box.BoxCamera.faces): their polygons (P, F, 4, 2)
+    and kinds (F,: 0 the top, 1 a side facing the part's x, 2 one facing its y). The sides seen are
+    those of the first box whose outward side the camera's foot ``nadir`` (mm) is on."""
+    pts = np.empty((params.shape[0], 8, 2))
+    corner_images(params, rotation, translation, pts)
+    faces = np.empty((3, 4), dtype=np.int64)
+    kinds = np.zeros(3, dtype=np.int64)
+    faces[0, 0], faces[0, 1], faces[0, 2], faces[0, 3] = 4, 5, 6, 7
+    count = 1
+    if params[0, 5] > 0:
+        foot = np.empty((4, 2))
+        _footprint(params, 0, foot)
+        for i in range(4):
+            j = (i + 1) % 4
+            # The footprint is counter-clockwise: (dy, -dx) points out of it.
+            ox, oy = foot[j, 1] - foot[i, 1], foot[i, 0] - foot[j, 0]
+            if (nadir[0] - foot[i, 0]) * ox + (nadir[1] - foot[i, 1]) * oy > 0 and count < 3:
+                faces[count, 0], faces[count, 1], faces[count, 2], faces[count, 3] = i, j, 4 + j, 4 + i
+                # Sides 0 and 2 run along the length: they face the part's y.
+                kinds[count] = 2 if i % 2 == 0 else 1
+                count += 1
+    polygons = np.empty((params.shape[0], count, 4, 2))
+    for p in range(params.shape[0]):
+        for f in range(count):
+            for c in range(4):
+                polygons[p, f, c, 0] = pts[p, faces[f, c], 0]
+                polygons[p, f, c, 1] = pts[p, faces[f, c], 1]
+    return polygons, kinds[:count].copy()
