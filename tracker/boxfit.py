@@ -188,7 +188,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
             height_mm: float, max_rms_px: float, px_per_norm: float, free_height: bool = False,
             size_prior: SizePrior | None = None, sum_sigma_px: float = 0.1, converged_steps: float = CONVERGED_STEPS,
             shade_prior: ShadePrior | None = None, tell_shades: bool = False,
-            keep_residuals: bool = False, keep_model_errors: bool = False) -> BoxFit | None:
+            keep_residuals: bool = False, keep_model_errors: bool = False, near: bool = False) -> BoxFit | None:
     """The footprint (and with ``free_height`` the height, from ``height_mm`` on) whose box best
     explains ``windows``, or None when the fit's RMS residual exceeds ``max_rms_px``. ``points_norm``:
     the edge points (Nx2, normalised) that bring the box near first; ``px_per_norm``: the focal
@@ -201,7 +201,9 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     a Jacobian more); with ``keep_residuals`` every window's residual and whether the fit kept it (for
     comparable_ms_px2: the sums once more where it dropped some); with ``keep_model_errors`` no window
     within _TRIM_SIGMAS sum sigmas is dropped as an outlier (see inliers), for a fit that nothing holds
-    near the part's shape (a box of a height tried, a view's own shape)."""
+    near the part's shape (a box of a height tried, a view's own shape); with ``near`` the ``start``
+    (and ``height_mm``) is already this view's fit (a pose): only the sums' stages run, their shades
+    solved from the start (see measure.Measurer._own_shape)."""
     free = [*_FOOTPRINT, *([_H] if free_height else [])]
     floor_px = _TRIM_SIGMAS * sum_sigma_px if keep_model_errors else 0.0
     params = box_params(start, height_mm)
@@ -223,8 +225,9 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     # size (a taller box on a smaller footprint has nearly the same outline), and with the height free
     # it wandered along that valley to another minimum of the sums (an 8 mm box near the view's edge,
     # started at 8 mm, ended at 15.2).
-    params, r, jac, _ = _robust(outline, params, _FOOTPRINT, _OUTLINE_ITERATIONS, floor_px=floor_px,
-                                converged=converged_steps)
+    if not near:
+        params, r, jac, _ = _robust(outline, params, _FOOTPRINT, _OUTLINE_ITERATIONS, floor_px=floor_px,
+                                    converged=converged_steps)
     middle = shade_start
     if shade_prior is not None:
         # A side face wider than a window's inner half fills that half: its sums read its shade apart
@@ -249,7 +252,8 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     # width: from there a fit of the shades finds them near the top's shade, and the edge where
     # the outline put it. Middling shades (or those other views tell) first bring the box to the
     # middle of that valley.
-    params, r, jac, keep = _robust(middling, params, free, _SUM_ITERATIONS, prior, converged_steps, floor_px)
+    params, r, jac, keep = _robust(sums if near else middling, params, free, _SUM_ITERATIONS, prior, converged_steps,
+                                   floor_px)
     params, r, jac = _least_squares(lambda p: sums(p, keep), params, free, _SUM_ITERATIONS, prior, converged_steps)
     rms = float(np.sqrt(np.mean(r**2))) if len(r) else math.inf
     # The sums' own normal matrix, inverted once: the size's covariance and, with a size lent, its own estimate.
