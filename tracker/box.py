@@ -143,6 +143,8 @@ def compile_model() -> None:
     lengths_in_faces(windows, square)
     lengths_in_faces(replace(windows, blur_px=1.0), square)  # the blurred path is compiled apart
     distances_to_outline(np.zeros((1, 2)), square[0, 0])
-    from tracker.facecover import box_faces  # noqa: PLC0415
+    from tracker.facecover import box_faces, corner_images  # noqa: PLC0415
 
-    box_faces(np.array([[0.0, 0.0, 0.0, 2.0, 1.0, 1.0]]), np.eye(3), np.array([0.0, 0.0, 10.0]), np.zeros(2))
+    box = np.array([[0.0, 0.0, 0.0, 2.0, 1.0, 1.0]])
+    box_faces(box, np.eye(3), np.array([0.0, 0.0, 10.0]), np.zeros(2))
+    corner_images(box, np.eye(3), np.array([0.0, 0.0, 10.0]), np.empty((1, 8, 2)))  # the outline's, called apart

@@ -6,9 +6,9 @@ The box fit evaluates this a few hundred windows x 3 faces x 7 boxes per Jacobia
 per part and frame; in numpy's whole-array steps that cost 16 ms per part and frame at 560x420,
 compiled (numba) a fraction of it. The faces' projection too: in numpy, a few small arrays per
 call, it cost 65 us per Jacobian's 7 boxes against 4 compiled; with it and the level pixels that lie
-wholly inside or outside a face read without cutting them, one vote frame's box fits took 0.55-0.6 of
-their time before (2026-12-03, the 65 fits of one 20 mm box's first 30 frames: 525-540 ms -> 296-339). Plain loops
-over plain arrays, nothing else.
+wholly inside or outside a face read without cutting them, a box fit takes 0.55-0.6 of its time
+before (2026-12-03: the 65 fits of one 20 mm box's first 30 frames, 525-540 ms -> 296-339 ms).
+Plain loops over plain arrays, nothing else.
 """
 
 from __future__ import annotations
@@ -274,6 +274,7 @@ def box_faces(params, rotation, translation, nadir):  # pragma: no cover (compil
             j = (i + 1) % 4
             # The footprint is counter-clockwise: (dy, -dx) points out of it.
             ox, oy = foot[j, 1] - foot[i, 1], foot[i, 0] - foot[j, 0]
+            # (A point outside a rectangle is on the outward side of at most two of its edges.)
             if (nadir[0] - foot[i, 0]) * ox + (nadir[1] - foot[i, 1]) * oy > 0 and count < 3:
                 faces[count, 0], faces[count, 1], faces[count, 2], faces[count, 3] = i, j, 4 + j, 4 + i
                 # Sides 0 and 2 run along the length: they face the part's y.

@@ -334,10 +334,10 @@ class Measurer:
     def _own_shape(self, pose: BoxFit | None, fit, known: KnownPart, height_mm: float) -> BoxFit | None:
         """``pose`` (a box of ``height_mm``) with what its view tells of the part's shape on its own (when
         the track wants it, ``known.refine``): fitted again with the height and size free, nothing lent,
-        from the pose (in a sharp image) and from the plane's rectangle at that height, the better kept. Lent
-        the track's size, a view reads the height it is lent (the size a height needs holds the height
-        where they trade: a 15 mm box's views lent 13.6 mm read 13.5, lent 16.5 read 16.0); lent the
-        side shades learnt at a wrong height, likewise."""
+        from the pose (in a sharp image) and from the plane's rectangle at that height, the better kept.
+        Lent the track's size, a view reads the height it is lent (the size a height needs holds the
+        height where they trade: a 15 mm box's views lent 13.6 mm read 13.5, lent 16.5 read 16.0); lent
+        the side shades learnt at a wrong height, likewise."""
         if pose is None or not known.refine:
             return pose
         # Its sums have minima a millimetre or more apart (a thin side face's shade trades with its width),
@@ -345,9 +345,9 @@ class Measurer:
         # bench/view_heights.py at 20 deg read 5.0-5.4 mm in views where a box of 8 mm explains the sums
         # better (0.050 against 0.078 px RMS); from the pose, other views end in the worse minimum. Both
         # are fitted, and the one that explains the view better is kept. Not in a blurred image (the
-        # textured belt model smooths): there the blur flattens the valley along which the height
-        # trades with the size, a fit from the pose stays near the track's height, and the estimate fed
-        # on its own error (the tests' 20 mm box on a knurled belt converged on 15.8-16.5 mm).
+        # textured belt model smooths): there the fits from the pose held the track near a wrong height
+        # (the tests' 20 mm box on a knurled belt converged on 15.8-16.5 mm; 19.5-19.7 from the plane's
+        # rectangle alone).
         near = [fit(pose.height_mm, start=pose.rect, near=True, **_OWN)] if self._blur_px == 0 else []
         views = [f for f in (*near, fit(height_mm, **_OWN)) if f is not None]
         if not views:
