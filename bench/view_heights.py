@@ -25,9 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 from heights import box_scene  # noqa: E402
 
-from tracker.config import MeasureConfig, TrackConfig, TrackerConfig  # noqa: E402
-from tracker.height import _height_information  # noqa: E402
-from tracker.measure import KnownPart  # noqa: E402
+from tracker.config import MeasureConfig, TrackerConfig  # noqa: E402
+from tracker.evaluate import own_height_readings  # noqa: E402
 from tracker.pipeline import Pipeline  # noqa: E402
 from tracker.synthetic import Renderer  # noqa: E402
 
@@ -42,24 +41,9 @@ def view_errors(height_mm: float, tilt_deg: float) -> dict:
     scene = box_scene(height_mm, tilt_deg)
     renderer = Renderer(scene)
     pipeline = Pipeline(renderer.calibration, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
-    told_sigma_mm = TrackConfig().view_height_told_sigma_mm
-    errors, sigmas = [], []
-    for i in range(scene.n_frames):
-        image, truth = renderer.render(i)
-        part = truth["objects"][0]
-        if part is not None and part["visible_px"] > 0:
-            mask = pipeline.segmenter(image)
-            known = KnownPart(part["x_mm"], part["y_mm"], None, height_mm=height_mm)
-            found = pipeline.measurer(image, pipeline.segmenter.reference, mask, [known])
-            m = min(found, key=lambda f: np.hypot(f.rect.x_mm - part["x_mm"], f.rect.y_mm - part["y_mm"]),
-                    default=None)
-            if m is not None and not m.clipped and m.shape_info is not None:
-                # The height alone, the size marginalised out (as the track judges a view).
-                height_info = _height_information(m.shape_info)
-                if height_info >= told_sigma_mm**-2:
-                    errors.append(float(np.linalg.solve(m.shape_info, m.shape_vec)[2]) - height_mm)
-                    sigmas.append(float(height_info**-0.5))
-        pipeline.process(i, image, scene.t_ns(i))
+    frames = (renderer.render(i) for i in range(scene.n_frames))
+    readings = own_height_readings(pipeline, scene, frames, height_mm)
+    errors, sigmas = [e for e, _ in readings], [s for _, s in readings]
     err, sig = np.abs(errors), np.array(sigmas)
     return {"scene": f"{height_mm:g} mm, {tilt_deg:g} deg", "views": len(err),
             "median_mm": float(np.median(err)) if len(err) else float("nan"),

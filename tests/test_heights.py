@@ -16,9 +16,8 @@ from tracker.box import SIDE_X, SIDE_Y, TOP, BoxCamera, EdgeWindows, lengths_in_
 from tracker.boxfit import SizePrior, _best_shades
 from tracker.cli import main
 from tracker.config import MeasureConfig, TrackerConfig
-from tracker.evaluate import evaluate
+from tracker.evaluate import evaluate, own_height_readings
 from tracker.geometry import rectangle_corners
-from tracker.height import _height_information
 from tracker.measure import KnownPart
 from tracker.pipeline import Pipeline
 from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec
@@ -280,19 +279,6 @@ def test_every_view_of_a_thin_box_reads_its_own_height_within_a_millimetre():
     scene = _box_scene(8.0, 20.0)
     renderer, frames = rendered(scene)
     pipeline = Pipeline(renderer.calibration, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
-    told_sigma_mm = TrackerConfig().track.view_height_told_sigma_mm
-    errors = []
-    for i, (image, truth) in enumerate(frames):
-        t = truth["objects"][0]
-        if t is not None and t["visible_px"] > 0:
-            mask = pipeline.segmenter(image)
-            found = pipeline.measurer(image, pipeline.segmenter.reference, mask,
-                                      [KnownPart(t["x_mm"], t["y_mm"], None, height_mm=8.0)])
-            m = min(found, key=lambda f: np.hypot(f.rect.x_mm - t["x_mm"], f.rect.y_mm - t["y_mm"]), default=None)
-            # Those that tell the height, as the track counts them (its part wholly in view).
-            if (m is not None and not m.clipped and m.shape_info is not None
-                    and _height_information(m.shape_info) >= told_sigma_mm**-2):
-                errors.append(float(np.linalg.solve(m.shape_info, m.shape_vec)[2]) - 8.0)
-        pipeline.process(i, image, scene.t_ns(i))
+    errors = [error for error, _ in own_height_readings(pipeline, scene, frames, 8.0)]
     assert len(errors) >= 60, len(errors)
     assert max(np.abs(errors)) < 1.0, np.round(errors, 2)

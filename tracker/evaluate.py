@@ -4,11 +4,17 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tracker.geometry import wrap_angle_deg
+
+if TYPE_CHECKING:
+    from tracker.pipeline import Pipeline
+    from tracker.synthetic import SceneSpec
 
 # A reported object within this distance of a true part is that part.
 MATCH_MM = 20.0
@@ -118,3 +124,34 @@ def own_track(views: list[tuple[dict, dict]]) -> list[tuple[dict, dict]]:
         return []
     own = Counter(o["id"] for o, _ in views).most_common(1)[0][0]
     return [(o, t) for o, t in views if o["id"] == own]
+
+
+def own_height_readings(pipeline: Pipeline, scene: SceneSpec, frames: Iterable[tuple[np.ndarray, dict]],
+                        height_mm: float) -> list[tuple[float, float]]:
+    """What each view of a one-part scene tells of the part's height on its own (--part-height auto: see
+    measure.Measurer._own_shape), each view given the true ``height_mm`` as its track's: (error, claimed
+    1 sigma), mm, of the views that tell the height as the track counts them (the part wholly measured,
+    surer than track.view_height_told_sigma_mm). ``frames``: (image, truth) of ``scene`` in order, which
+    ``pipeline`` processes too (its segmentation and belt reference as a run's)."""
+    # The measurement's modules only here: `tracker evaluate` reads pose files and needs none.
+    from tracker.height import _height_information  # noqa: PLC0415
+    from tracker.measure import KnownPart  # noqa: PLC0415
+
+    told = pipeline.config.track.view_height_told_sigma_mm**-2
+    readings = []
+    for i, (image, truth) in enumerate(frames):
+        part = truth["objects"][0]
+        if part is not None and part["visible_px"] > 0:
+            mask = pipeline.segmenter(image)
+            known = KnownPart(part["x_mm"], part["y_mm"], None, height_mm=height_mm)
+            found = pipeline.measurer(image, pipeline.segmenter.reference, mask, [known])
+            m = min(found, key=lambda f: math.hypot(f.rect.x_mm - part["x_mm"], f.rect.y_mm - part["y_mm"]),
+                    default=None)
+            if m is not None and not m.clipped and m.shape_info is not None:
+                # The height alone, the size marginalised out (as the track judges a view).
+                information = _height_information(m.shape_info)
+                if information >= told:
+                    readings.append((float(np.linalg.solve(m.shape_info, m.shape_vec)[2]) - height_mm,
+                                     float(information**-0.5)))
+        pipeline.process(i, image, scene.t_ns(i))
+    return readings
