@@ -250,13 +250,15 @@ class HeightEstimate:
         self._converged = math.sqrt(shape[1][2, 2]) < limit_mm
 
     def rect(self, m: Measurement) -> Rect:
-        """The pose to take from view ``m``: its flat measurement when flat leads (or is decided); while
-        voting, on a view that voted its box at the leading height (see _rect_at); else its own."""
+        """The pose to take from view ``m``: its flat measurement when flat leads (or is decided); on a
+        view that voted, its box at the height leading the vote or, the vote decided by this view, at the
+        height estimated (see _rect_at; its own was measured at the height that led before it); else its
+        own."""
         lead = self.leading_mm
         if lead == 0.0:
             return m.flat_rect or m.rect
-        if self.voting and m.trials and lead is not None:
-            return _rect_at(m.trials, lead) or m.rect
+        if m.trials and (lead is not None or not self.voting):
+            return _rect_at(m.trials, self.height_mm if lead is None else lead) or m.rect
         return m.rect
 
     def _vote(self, trials: tuple[HeightTrial, ...], x_mm: float, y_mm: float) -> None:
