@@ -13,7 +13,7 @@ explain the data (a part no box at all) is rejected, and the caller keeps the pl
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -145,6 +145,12 @@ class ViewShades:
     # leaps, unsure by 0.2-0.9) tells none: flagged, the part's own height was counted against (15, 20
     # and 60 mm boxes near the view's edge).
     outside: tuple[bool, bool] = (False, False)
+    # What the view tells of (length, width, end shade, long shade) together, its pose marginalised out:
+    # information (4x4; 1/mm^2, 1/mm per unit shade, per unit shade^2) and information vector (4); None
+    # where not told. A sliver's shade trades with the size next to it, and the same part's views, which
+    # see its faces at other widths, decide the two together (tracker/shades.py).
+    info: np.ndarray | None = field(default=None, compare=False)
+    vec: np.ndarray | None = field(default=None, compare=False)
 
 
 def predicted_sums(camera: BoxCamera, windows: EdgeWindows, params: np.ndarray, shades: np.ndarray | None = None,
@@ -267,16 +273,29 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     own = None if size_prior is None or normal_inv is None else _own_size(normal_inv, jac, r, params, free)
     shades = None
     if tell_shades and params[_H] > 0 and len(r) > len(free) + 2:
-        kept = windows if isinstance(keep, slice) else windows.subset(keep)
         polygons, kinds = camera.faces(params)
-        # The shades the fit's last sums were predicted with (``r`` its residuals there).
-        solved = _shaded(lengths_in_faces(kept, polygons), kinds, kept.covered_px, None, shade_start, shade_hold)[1]
         # The sums along one side may share an error of sum_sigma_px (the belt's level under them, the
         # blur): a face w px wide tells its shade no better than sum_sigma_px / w.
         widths = _side_widths_px(polygons, kinds, px_per_norm)
         floor = (sum_sigma_px / np.maximum(widths, 1e-9)) ** 2
-        shades = _view_shades(lambda p, s: sums(p, keep, s), params, solved[0], r, free, floor,
-                              widths >= _OUTSIDE_MIN_WIDTH_PX)
+
+        def told_over(which: np.ndarray | slice) -> ViewShades:
+            kept = windows if isinstance(which, slice) else windows.subset(which)
+            # The shades these sums are best predicted with at the fit's box (``at`` their residuals).
+            solved = _shaded(lengths_in_faces(kept, polygons), kinds, kept.covered_px, None, shade_start,
+                             shade_hold)[1][0]
+            at = sums(params[None], which, solved)[0]
+            return _view_shades(lambda p, s: sums(p, which, s), params, solved, at, free, floor,
+                                widths >= _OUTSIDE_MIN_WIDTH_PX)
+
+        # The shades are told over every window within _TRIM_SIGMAS sum sigmas, not only those the fit
+        # kept: a fit lent shades drops the windows of a sliver they do not explain, and the rest tell
+        # back what it was lent (bench/heights_random.py's scene 79: its end faces, 0.70, told 0.56-0.69
+        # as it was lent 0.4-0.9; over these windows 0.65-0.68). Whether a box of this height needs a
+        # side no part has is judged over the windows it kept, as the vote's heights are compared.
+        shades = told_over(inliers(sums(params[None])[0], _TRIM_SIGMAS * sum_sigma_px))
+        if shade_prior is None:
+            shades = replace(shades, outside=told_over(keep).outside)
     every = inlying = None
     if keep_residuals:
         every = r if isinstance(keep, slice) else sums(params[None])[0]
@@ -289,6 +308,10 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
         if info[0] is not None:
             order = [1, 0, 2]
             info = (info[0][np.ix_(order, order)], info[1][order])
+        if shades is not None:
+            # Its shades stay those of the faces its parameters named: their size and shades together
+            # would be of another box's (told apart, as before).
+            shades = replace(shades, info=None, vec=None)
     rect = Rect(float(x), float(y), wrap_angle_deg(float(angle)), float(length), float(width))
     return BoxFit(rect, float(params[_H]), rms, size_cov, *info, len(windows),
                   None if own is None else (float(own[0]), float(own[1])), shades, every, inlying)
@@ -343,6 +366,7 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
         cov = np.linalg.pinv(info[sub])
         own[shown] = shades[shown] - cov @ reduced[shown]
         variances[shown] = np.diag(cov) * max(float(np.mean(r**2)), 1e-12)
+    joint = _size_and_shades(normal, grad, params, shades, free, max(float(np.mean(r**2)), 1e-12))
     variances = np.maximum(variances, floor)
     margin = _OUTSIDE_SIGMAS * np.sqrt(variances)
     # A step that leaps farther than the shades a side may have span is no reading of the shade (the
@@ -352,7 +376,24 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
     outside = wide & near & ((own + margin < _SHADE_RANGE[0]) | (own - margin >= _SHADE_TOLD_MAX))
     variances[~(variances > 0) | (own < _SHADE_RANGE[0]) | (own >= _SHADE_TOLD_MAX)] = math.inf
     return ViewShades((float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])),
-                      (bool(outside[0]), bool(outside[1])))
+                      (bool(outside[0]), bool(outside[1])), *joint)
+
+
+def _size_and_shades(normal: np.ndarray, grad: np.ndarray, params: np.ndarray, shades: np.ndarray, free: list[int],
+                     variance: float) -> tuple[np.ndarray, np.ndarray]:
+    """What the sums alone tell of (length, width, end shade, long shade) together (see ViewShades.info):
+    ``normal`` and ``grad`` are the sums' normal matrix and gradient over the ``free`` box parameters
+    and then the two shades, at the fit's result (``params``, ``shades``); the rest of ``free`` (the
+    pose, a free height) is marginalised out (a Schur complement), and the sums' noise is ``variance``."""
+    n = len(free)
+    keep = [free.index(3), free.index(4), n, n + 1]
+    rest = [i for i in range(n + 2) if i not in keep]
+    with np.errstate(all="ignore"):
+        coupling = np.linalg.lstsq(normal[np.ix_(rest, rest)], normal[np.ix_(rest, keep)], rcond=None)[0]
+    info = normal[np.ix_(keep, keep)] - normal[np.ix_(keep, rest)] @ coupling
+    reduced = grad[keep] - coupling.T @ grad[rest]
+    at = np.array([params[3], params[4], shades[0], shades[1]])
+    return info / variance, (info @ at - reduced) / variance
 
 
 def _own_size(normal_inv: np.ndarray, jac: np.ndarray, r: np.ndarray, params: np.ndarray,
