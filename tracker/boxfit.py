@@ -293,8 +293,10 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
         # back what it was lent (bench/heights_random.py's scene 79: its end faces, 0.70, told 0.56-0.69
         # as it was lent 0.4-0.9; over these windows 0.65-0.68). Whether a box of this height needs a
         # side no part has is judged over the windows it kept, as the vote's heights are compared.
-        shades = told_over(inliers(sums(params[None])[0], _TRIM_SIGMAS * sum_sigma_px))
-        if shade_prior is None:
+        near_box = inliers(sums(params[None])[0], _TRIM_SIGMAS * sum_sigma_px)
+        shades = told_over(near_box)
+        fit_kept = np.ones(len(windows), dtype=bool) if isinstance(keep, slice) else keep
+        if shade_prior is None and not np.array_equal(near_box, fit_kept):
             shades = replace(shades, outside=told_over(keep).outside)
     every = inlying = None
     if keep_residuals:
