@@ -12,9 +12,11 @@ from test_height_auto import _auto, _vote_views
 from test_height_auto import _view as _made_up_view
 from test_heights import _box_scene
 
-from tracker.boxfit import ViewShades
+from tracker import measure
+from tracker.boxfit import ViewShades, fit_box
 from tracker.config import MeasureConfig, TrackConfig, TrackerConfig
 from tracker.evaluate import evaluate
+from tracker.geometry import Rect
 from tracker.measure import KnownPart, Measurement
 from tracker.pipeline import Pipeline
 from tracker.shades import ShadeEstimate
@@ -136,6 +138,33 @@ def test_a_thin_boxs_shades_are_learnt_from_its_views_not_from_what_its_fits_wer
     intensity = scene.parts[0].intensity
     for belt in (scene.belt_level, 0.88 * scene.belt_level):
         assert abs(end - (_SIDE_SHADE[0] * intensity - belt) / (intensity - belt)) <= 0.07, end
+
+
+def test_a_fit_whose_width_outgrows_its_length_tells_the_shades_of_its_rectangles_faces(monkeypatch):
+    """A box fit's faces are named by its parameters' axes, and a fit whose width ends longer than its
+    length (a near-square part) reports the other side as its length: its shades are swapped with it.
+    They were not, and such a view told its long faces' shade as its end faces' (here 0.47 for 0.72).
+    One view of the tests' 20 mm box at 20 deg fitted from its rectangle and from the same rectangle
+    turned by 90 deg (length and width swapped)."""
+    scene = _box_scene(20, 20)
+    renderer, frames = rendered(scene)
+    calls = []
+
+    def recorded(*args, **kwargs):
+        calls.append((args, kwargs))
+        return fit_box(*args, **kwargs)
+
+    monkeypatch.setattr(measure, "fit_box", recorded)
+    pipeline = Pipeline(renderer.calibration, TrackerConfig(measure=MeasureConfig(part_height_mm=20)))
+    for i, (image, _) in enumerate(frames[:30]):
+        pipeline.process(i, image, scene.t_ns(i))
+    (camera, points, windows, start, height, *rest), kwargs = calls[-1]
+    kwargs = dict(kwargs, tell_shades=True, size_prior=None, shade_prior=None)
+    turned = Rect(start.x_mm, start.y_mm, start.angle_deg + 90.0, start.width_mm, start.length_mm)
+    fits = [fit_box(camera, points, windows, s, height, *rest, **kwargs) for s in (start, turned)]
+    assert fits[0].rect.length_mm == pytest.approx(fits[1].rect.length_mm, abs=1e-6)
+    assert fits[0].view_shades.shades == pytest.approx(fits[1].view_shades.shades, abs=1e-6)
+    assert fits[0].view_shades.shades[0] > fits[0].view_shades.shades[1] + 0.1  # the two faces differ
 
 
 def _converged_error_mm(frames: list[tuple[dict, dict]], height_mm: float) -> tuple[float, float]:

@@ -311,9 +311,8 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
             order = [1, 0, 2]
             info = (info[0][np.ix_(order, order)], info[1][order])
         if shades is not None:
-            # Its shades stay those of the faces its parameters named: their size and shades together
-            # would be of another box's (told apart, as before).
-            shades = replace(shades, info=None, vec=None)
+            # Its faces' kinds follow its parameters' axes: the end faces are now those of its width.
+            shades = _swapped(shades)
     rect = Rect(float(x), float(y), wrap_angle_deg(float(angle)), float(length), float(width))
     return BoxFit(rect, float(params[_H]), rms, size_cov, *info, len(windows),
                   None if own is None else (float(own[0]), float(own[1])), shades, every, inlying)
@@ -379,6 +378,15 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
     variances[~(variances > 0) | (own < _SHADE_RANGE[0]) | (own >= _SHADE_TOLD_MAX)] = math.inf
     return ViewShades((float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])),
                       (bool(outside[0]), bool(outside[1])), *joint)
+
+
+def _swapped(view: ViewShades) -> ViewShades:
+    """``view`` with its length and width, and its end and long faces, swapped (a box whose width
+    outgrew its length: its rectangle's length is the other side)."""
+    order = [1, 0, 3, 2]
+    return ViewShades(view.shades[::-1], view.variances[::-1], view.outside[::-1],
+                      None if view.info is None else view.info[np.ix_(order, order)],
+                      None if view.vec is None else view.vec[order])
 
 
 def _size_and_shades(normal: np.ndarray, grad: np.ndarray, params: np.ndarray, shades: np.ndarray, free: list[int],
