@@ -271,6 +271,9 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     if free_height and len(jac) > len(free):
         info = view_information(jac, r, params, rms)
     own = None if size_prior is None or normal_inv is None else _own_size(normal_inv, jac, r, params, free)
+    # Every window's residual at the fit's box (``r`` holds those it kept), for the shades and the caller.
+    wanted = tell_shades or keep_residuals
+    every = r if isinstance(keep, slice) else (sums(params[None])[0] if wanted else None)
     shades = None
     if tell_shades and params[_H] > 0 and len(r) > len(free) + 2:
         polygons, kinds = camera.faces(params)
@@ -293,15 +296,16 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
         # back what it was lent (bench/heights_random.py's scene 79: its end faces, 0.70, told 0.56-0.69
         # as it was lent 0.4-0.9; over these windows 0.65-0.68). Whether a box of this height needs a
         # side no part has is judged over the windows it kept, as the vote's heights are compared.
-        near_box = inliers(sums(params[None])[0], _TRIM_SIGMAS * sum_sigma_px)
+        near_box = inliers(every, _TRIM_SIGMAS * sum_sigma_px)
         shades = told_over(near_box)
         fit_kept = np.ones(len(windows), dtype=bool) if isinstance(keep, slice) else keep
         if shade_prior is None and not np.array_equal(near_box, fit_kept):
             shades = replace(shades, outside=told_over(keep).outside)
-    every = inlying = None
+    inlying = None
     if keep_residuals:
-        every = r if isinstance(keep, slice) else sums(params[None])[0]
         inlying = np.ones(len(every), dtype=bool) if isinstance(keep, slice) else keep
+    else:
+        every = None
     x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0
@@ -354,20 +358,18 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
     shade_jac = np.stack([(residuals(params[None], shades + d)[0] - r) / _SHADE_STEP for d in np.eye(2) * _SHADE_STEP])
     jac = np.vstack([box_jac, shade_jac]).T
     normal, grad = jac.T @ jac, jac.T @ r
-    box, shade = slice(0, len(free)), slice(len(free), len(free) + 2)
-    with np.errstate(all="ignore"):
-        coupling = np.linalg.lstsq(normal[box, box], normal[box, shade], rcond=None)[0]
-    info = normal[shade, shade] - normal[shade, box] @ coupling
-    reduced = grad[shade] - coupling.T @ grad[box]
+    n = len(free)
+    info, reduced = marginalised(normal, grad, [n, n + 1], list(range(n)))
     # A face not shown moves no sum: its shade is untold (and out of the other's solution).
-    shown = np.diag(normal)[shade] > 1e-12
+    shown = np.diag(normal)[n:] > 1e-12
+    variance = max(float(np.mean(r**2)), 1e-12)
     own, variances = shades.astype(np.float64), np.full(2, math.inf)
     if shown.any():
         sub = np.ix_(shown, shown)
         cov = np.linalg.pinv(info[sub])
         own[shown] = shades[shown] - cov @ reduced[shown]
-        variances[shown] = np.diag(cov) * max(float(np.mean(r**2)), 1e-12)
-    joint = _size_and_shades(normal, grad, params, shades, free, max(float(np.mean(r**2)), 1e-12))
+        variances[shown] = np.diag(cov) * variance
+    joint = _size_and_shades(normal, grad, params, shades, free, variance)
     variances = np.maximum(variances, floor)
     margin = _OUTSIDE_SIGMAS * np.sqrt(variances)
     # A step that leaps farther than the shades a side may have span is no reading of the shade (the
@@ -389,6 +391,17 @@ def _swapped(view: ViewShades) -> ViewShades:
                       None if view.vec is None else view.vec[order])
 
 
+def marginalised(normal: np.ndarray, grad: np.ndarray, keep: list[int],
+                 rest: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """A normal matrix and gradient (or an information matrix and vector) over the parameters ``keep``
+    (indices), those of ``rest`` marginalised out: a Schur complement."""
+    if not rest:
+        return normal[np.ix_(keep, keep)], grad[keep]
+    with np.errstate(all="ignore"):
+        coupling = np.linalg.lstsq(normal[np.ix_(rest, rest)], normal[np.ix_(rest, keep)], rcond=None)[0]
+    return normal[np.ix_(keep, keep)] - normal[np.ix_(keep, rest)] @ coupling, grad[keep] - coupling.T @ grad[rest]
+
+
 def _size_and_shades(normal: np.ndarray, grad: np.ndarray, params: np.ndarray, shades: np.ndarray, free: list[int],
                      variance: float) -> tuple[np.ndarray, np.ndarray]:
     """What the sums alone tell of (length, width, end shade, long shade) together (see ViewShades.info):
@@ -397,11 +410,7 @@ def _size_and_shades(normal: np.ndarray, grad: np.ndarray, params: np.ndarray, s
     pose, a free height) is marginalised out (a Schur complement), and the sums' noise is ``variance``."""
     n = len(free)
     keep = [free.index(3), free.index(4), n, n + 1]
-    rest = [i for i in range(n + 2) if i not in keep]
-    with np.errstate(all="ignore"):
-        coupling = np.linalg.lstsq(normal[np.ix_(rest, rest)], normal[np.ix_(rest, keep)], rcond=None)[0]
-    info = normal[np.ix_(keep, keep)] - normal[np.ix_(keep, rest)] @ coupling
-    reduced = grad[keep] - coupling.T @ grad[rest]
+    info, reduced = marginalised(normal, grad, keep, [i for i in range(n + 2) if i not in keep])
     at = np.array([params[3], params[4], shades[0], shades[1]])
     return info / variance, (info @ at - reduced) / variance
 
@@ -424,12 +433,8 @@ def view_information(jac: np.ndarray, r: np.ndarray, params: np.ndarray, rms: fl
     estimate from the fit's result. One view of a thin box from above decides its height and size
     only together (a valley along which the box grows as it shrinks); views from elsewhere run their
     valleys other ways, and their information added up decides both."""
-    normal, grad = jac.T @ jac, jac.T @ r
-    pose, shape = [0, 1, 2], [3, 4, _H]
-    with np.errstate(all="ignore"):
-        coupling = np.linalg.lstsq(normal[np.ix_(pose, pose)], normal[np.ix_(pose, shape)], rcond=None)[0]
-    info = normal[np.ix_(shape, shape)] - normal[np.ix_(shape, pose)] @ coupling
-    reduced_grad = grad[shape] - coupling.T @ grad[pose]
+    shape = [3, 4, _H]
+    info, reduced_grad = marginalised(jac.T @ jac, jac.T @ r, shape, [0, 1, 2])
     variance = max(rms, 1e-6) ** 2
     return info / variance, (info @ params[shape] - reduced_grad) / variance
 

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from tracker.boxfit import ShadePrior, ViewShades
+from tracker.boxfit import ShadePrior, ViewShades, marginalised
 from tracker.config import TrackConfig
 
 
@@ -86,12 +86,7 @@ def _told(view: ViewShades, cfg: TrackConfig) -> tuple[np.ndarray, np.ndarray]:
     # A shade it does not tell is marginalised out (not held where the fit had it: what the view tells
     # of the size next to that face would lean towards it).
     sub = [0, 1, *use]
-    out = [i for i in range(4) if i not in sub]
-    info, vec = view.info[np.ix_(sub, sub)], view.vec[sub]
-    if out:
-        coupling = np.linalg.pinv(view.info[np.ix_(out, out)]) @ view.info[np.ix_(out, sub)]
-        info = info - view.info[np.ix_(sub, out)] @ coupling
-        vec = vec - coupling.T @ view.vec[out]
+    info, vec = marginalised(view.info, view.vec, sub, [i for i in range(4) if i not in sub])
     # No surer than the least variance of each shade it tells: its information scaled down to that.
     alone = np.diag(np.linalg.pinv(info))[2:]
     scale = min(1.0, float(np.min(alone / least[told])))
