@@ -15,6 +15,7 @@ from tracker.cli import main
     (json.dumps({"track": {"gate_mm": None}}).encode(), "track.gate_mm: expected a finite number"),
     (json.dumps({"track": {"height_unconverged_sigma_mm": 0.2}}).encode(),
      "track.height_unconverged_sigma_mm: expected >= height_converged_sigma_mm (0.3), got 0.2"),
+    (json.dumps({"measure": {"model_sigma_px": -0.01}}).encode(), "measure.model_sigma_px: expected >= 0, got -0.01"),
     (json.dumps({"bogus": {}}).encode(), "unknown sections"),
     (json.dumps({"segment": 3}).encode(), "segment: expected an object"),
     (json.dumps([1]).encode(), "expected a JSON object"),

@@ -321,16 +321,18 @@ _LOOKS = 1e4 * np.outer(_SEEN, _SEEN) + 1e-2 * np.eye(3)
 _FITS_BEST_AT_20 = {0.0: 0.06, 5.0: 0.06, 10.0: 0.06}
 
 
-@pytest.mark.parametrize("told_mm,counted", [(20.4, True), (21.2, False)])
-def test_views_between_the_votes_refine_the_height_once_the_vote_decides(told_mm, counted):
+@pytest.mark.parametrize("told_floors,counted", [(0.8, True), (2.4, False)])
+def test_views_between_the_votes_refine_the_height_once_the_vote_decides(told_floors, counted):
     """The views between the vote's (fitted at the leading height, what each tells of the shape kept)
     refine the estimate as if they came when the vote decides, and count towards its convergence: a
     part crossing the view quickly converged only after as many views more (bench/heights_random.py:
     10 of 120 scenes converged after the first third of their crossing, 2 now). Where they move it
     more than track.view_height_sigma_mm from the box they were fitted as, they do not count: the
-    views fitted at the estimate decide when it has converged."""
+    views fitted at the estimate decide when it has converged. (They tell 20 mm + this many floors,
+    track.view_height_sigma_mm: each counts no surer than that.)"""
     cfg = TrackConfig()
     height = HeightEstimate(cfg)
+    told_mm = 20.0 + told_floors * cfg.view_height_sigma_mm
     between = _refining_view(told_mm)
     for k in range(cfg.height_vote_min_views):
         x = k * cfg.height_vote_step_mm
@@ -398,10 +400,10 @@ def test_a_refined_height_converges_only_after_enough_views():
 
 def test_views_that_scatter_more_than_they_claim_converge_only_as_their_scatter_allows():
     """Views that each claim their height to 0.01 mm but scatter by +-1.5 mm, as a blurred image's do
-    (each within the gate): the estimate is as unsure as their scatter says, so it converges later
-    (measured: after 9 views) than views that agree as well as they claim (5: the test above), and
-    on their mean."""
-    cfg, height = _voted_20_mm()
+    (each within the gate, each view no surer than 0.5 mm: track.view_height_sigma_mm): the estimate is
+    as unsure as their scatter says, so it converges later (measured: after 9 views) than views that
+    agree as well as they claim (5: the test above), and on their mean."""
+    cfg, height = _voted_20_mm(TrackConfig(view_height_sigma_mm=0.5))
     converged = []
     for k in range(4 * cfg.height_converged_views):
         height.add(_refining_view(20.0 + (1.5 if k % 2 else -1.5)), 0.0, 0.0)
@@ -415,9 +417,12 @@ def test_a_converged_height_stays_converged_until_its_uncertainty_passes_the_sec
     views that scatter by +-2.5 mm (each within the gate) then widen it to 0.30-0.34 mm (measured),
     and it stays converged while below track.height_unconverged_sigma_mm; once past it, not until it
     is below the first limit again. The limits here are 0.25 and 0.32 mm (the defaults, 0.3 and 0.5,
-    are farther apart than such views widen the estimate). On the tests' 10 mm box straight
-    down its sigma went from 0.29 to 0.301 mm and back, and, without this, what the PLC reads with it."""
-    cfg, height = _voted_20_mm(TrackConfig(height_converged_sigma_mm=0.25, height_unconverged_sigma_mm=0.32))
+    are farther apart than such views widen the estimate), each view no surer than 0.5 mm
+    (track.view_height_sigma_mm: views 2.5 mm off are then within the gate). On the tests' 10 mm box
+    straight down its sigma went from 0.29 to 0.301 mm and back, and, without this, what the PLC reads
+    with it."""
+    cfg, height = _voted_20_mm(TrackConfig(height_converged_sigma_mm=0.25, height_unconverged_sigma_mm=0.32,
+                                           view_height_sigma_mm=0.5))
     for _ in range(cfg.height_converged_views):
         height.add(_refining_view(20.0), 0.0, 0.0)
     assert height.converged

@@ -194,7 +194,8 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
             height_mm: float, max_rms_px: float, px_per_norm: float, free_height: bool = False,
             size_prior: SizePrior | None = None, sum_sigma_px: float = 0.1, converged_steps: float = CONVERGED_STEPS,
             shade_prior: ShadePrior | None = None, tell_shades: bool = False,
-            keep_residuals: bool = False, keep_model_errors: bool = False, near: bool = False) -> BoxFit | None:
+            keep_residuals: bool = False, keep_model_errors: bool = False, near: bool = False,
+            model_sigma_px: float = 0.0) -> BoxFit | None:
     """The footprint (and with ``free_height`` the height, from ``height_mm`` on) whose box best
     explains ``windows``, or None when the fit's RMS residual exceeds ``max_rms_px``. ``points_norm``:
     the edge points (Nx2, normalised) that bring the box near first; ``px_per_norm``: the focal
@@ -209,7 +210,8 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     within _TRIM_SIGMAS sum sigmas is dropped as an outlier (see inliers), for a fit that nothing holds
     near the part's shape (a box of a height tried, a view's own shape); with ``near`` the ``start``
     (and ``height_mm``) is already this view's fit (a pose): only the sums' stages run, their shades
-    solved from the start (see measure.Measurer._own_shape)."""
+    solved from the start (see measure.Measurer._own_shape); ``model_sigma_px``: the box model's own error
+    on the sums, which bounds how surely the view tells its height (see view_information)."""
     free = [*_FOOTPRINT, *([_H] if free_height else [])]
     floor_px = _TRIM_SIGMAS * sum_sigma_px if keep_model_errors else 0.0
     params = box_params(start, height_mm)
@@ -269,7 +271,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
         return None
     info = (None, None)
     if free_height and len(jac) > len(free):
-        info = view_information(jac, r, params, rms)
+        info = view_information(jac, r, params, rms, model_sigma_px)
     own = None if size_prior is None or normal_inv is None else _own_size(normal_inv, jac, r, params, free)
     # Every window's residual at the fit's box (``r`` holds those it kept), for the shades and the caller.
     wanted = tell_shades or keep_residuals
@@ -424,7 +426,8 @@ def _own_size(normal_inv: np.ndarray, jac: np.ndarray, r: np.ndarray, params: np
     return params[[3, 4]] + step[[free.index(3), free.index(4)]]
 
 
-def view_information(jac: np.ndarray, r: np.ndarray, params: np.ndarray, rms: float) -> tuple[np.ndarray, np.ndarray]:
+def view_information(jac: np.ndarray, r: np.ndarray, params: np.ndarray, rms: float,
+                     model_sigma_px: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """One view's own information on the box's shape (length, width, height: what every view of the
     part shares) from a fit with all six free: (information 3x3, information vector 3; 1/mm^2, 1/mm).
 
@@ -432,11 +435,30 @@ def view_information(jac: np.ndarray, r: np.ndarray, params: np.ndarray, rms: fl
     Any prior the fit had is taken back out: the vector is that of the sums' own Gauss-Newton
     estimate from the fit's result. One view of a thin box from above decides its height and size
     only together (a valley along which the box grows as it shrinks); views from elsewhere run their
-    valleys other ways, and their information added up decides both."""
+    valleys other ways, and their information added up decides both.
+
+    The sums' noise averages out over the windows; the model's own error (``model_sigma_px``) need
+    not: the height is held no surer than an error that size on every window moves it, each window's
+    the way that moves it most (the height's column of the Jacobian, the other parameters' part taken
+    out, ``lone``: the height moves by sum(|lone|) / sum(lone^2) mm per pixel of such an error). Where
+    the height rests on a few windows across slivers that move it by tens of mm per pixel, that
+    bounds the view; where many windows of wide side faces tell it, hardly."""
     shape = [3, 4, _H]
     info, reduced_grad = marginalised(jac.T @ jac, jac.T @ r, shape, [0, 1, 2])
     variance = max(rms, 1e-6) ** 2
-    return info / variance, (info @ params[shape] - reduced_grad) / variance
+    info, vec = info / variance, (info @ params[shape] - reduced_grad) / variance
+    if model_sigma_px > 0 and jac.shape[1] > _H:
+        rest = jac[:, :_H]
+        lone = jac[:, _H] - rest @ np.linalg.lstsq(rest, jac[:, _H], rcond=None)[0]
+        lever_mm_px = float(np.sum(np.abs(lone))) / max(float(np.sum(lone**2)), 1e-12)
+        # The height's variance widened by (model_sigma_px * lever)^2, in information form (Sherman-Morrison:
+        # the view's valley, a singular information, stays as it is along the size).
+        widen = (model_sigma_px * lever_mm_px) ** 2
+        towards = info[:, 2]
+        damp = np.eye(3) - widen * np.outer(towards, [0.0, 0.0, 1.0]) / (1.0 + widen * info[2, 2])
+        info, vec = damp @ info, damp @ vec
+        info = 0.5 * (info + info.T)
+    return info, vec
 
 
 def _size_covariance(normal_inv: np.ndarray, free: list[int], rms: float) -> np.ndarray:

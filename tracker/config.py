@@ -145,6 +145,17 @@ class MeasureConfig:
     # A box's coverage sums scatter by about this much (px, 1 sigma): it weighs a size known from a
     # track's other views against the sums of one view, where a thin side face leaves the size open.
     sum_sigma_px: float = 0.1
+    # The box model's own error on the sums a view reads its height from (px): a sub-pixel error that
+    # does not average out over an edge's windows (a sensor's or a renderer's sampling of a sliver a
+    # fifth of a pixel wide; the renderer's 8x8 samples err by 0.01-0.03 of a pixel's area on an edge).
+    # A view tells its height no surer than such an error on every window, each the way that moves the
+    # height most, allows (boxfit.view_information): near the middle of the view a thin part's height
+    # rests on slivers whose windows move it 20-50 mm per pixel, and its views claimed it to 0.2 mm
+    # where they read it 1-3 mm off, alike (bench/heights_random.py scene 48, a 5 mm box straight
+    # down: 0.65 mm off once converged; 0.37 now). Over 1209 views of 48 random scenes, with 0.02 the
+    # views' errors over the uncertainty they claim have a median of 0.61 (a normal's: 0.67; without,
+    # 1.55, and one view in four beyond 3).
+    model_sigma_px: float = 0.02
     # A part's track learns its side shades from its views (with --part-height auto those of its boxes
     # at the height it is estimated or voted to have, see Track._learn_shades) and lends them to its
     # fits where a side face is a sliver (tracker/shades.py): one view of a sliver settles its shade
@@ -169,6 +180,8 @@ class MeasureConfig:
         _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "box_max_rms_px",
                   "touch_min_notch_px", "sum_sigma_px", "square_mm", "box_max_windows",
                   "height_votes_per_frame")
+        if self.model_sigma_px < 0:
+            raise BadInput(f"measure.model_sigma_px: expected >= 0, got {self.model_sigma_px}")
         if self.part_height_mm < 0:
             raise BadInput(f"part_height_mm: expected >= 0, got {self.part_height_mm}")
         if self.part_height_mm > 0:
@@ -233,13 +246,14 @@ class TrackConfig:
     # view_height_sigma_mm (1 sigma) of its height, nor than view_size_sigma_mm of its size: a view's
     # size errs along its valley with its height, by 0.2-0.4 mm where its height errs by 0.5-1 (the
     # tests' 20 mm box at 10 deg; held to 0.1, one view that a young estimate disagreed with on its
-    # length alone was left out, and the estimate settled 0.8 mm high). The view that decides the
-    # vote tells the track its side shades only if its box is within view_height_sigma_mm of the
-    # height voted (with measure.learn_shades: the shades a box of another height needs are another
-    # part's).
+    # length alone was left out, and the estimate settled 0.8 mm high). Views whose height rests on
+    # slivers say how unsure they are themselves (measure.model_sigma_px); the floor was 0.5 before
+    # they did. The view that decides the vote tells the track its side shades only if its box is
+    # within view_height_sigma_mm of the height voted (with measure.learn_shades: the shades a box of
+    # another height needs are another part's).
     start_shape_sigma_mm: float = 0.3
     start_height_span_fraction: float = 0.125
-    view_height_sigma_mm: float = 0.5
+    view_height_sigma_mm: float = 0.3
     view_size_sigma_mm: float = 0.15
     # A view that tells its own height (its size marginalised out) less surely than this (1 sigma, mm)
     # adds nothing to the estimate: it shows hardly any side face (near the middle of the view, a thin
@@ -248,8 +262,10 @@ class TrackConfig:
     # deg: its views near the middle claimed 6-15 mm and pulled it 0.5 mm up). Whether it disagrees
     # with the estimate (view_gate_chi2) still counts: left out of that too, a wrong vote's estimate
     # was voted on again only near the middle of the view (the tests' 15 mm box at 10 deg, never
-    # converged; counted, after 62 % of its crossing, 0.25 mm off).
-    view_height_told_sigma_mm: float = 0.5
+    # converged; counted, after 62 % of its crossing, 0.25 mm off). With the model's own error in what
+    # a view claims (measure.model_sigma_px) such views say so themselves; 0.5 before, and 1 mm since
+    # lets in views that tell a little, honestly (random scenes: 112 of 120 met every bound with 0.5).
+    view_height_told_sigma_mm: float = 1.0
     # A view whose own shape disagrees with the estimate by more than this chi-square (3 degrees of
     # freedom) is left out; this many in a row, and the height is voted again.
     view_gate_chi2: float = 25.0

@@ -287,7 +287,8 @@ class Measurer:
             start = starts[height_mm] if start is None else start
             return fit_box(self._box_camera, points, windows, start, height_mm, cfg.box_max_rms_px,
                            self._focal_px, sum_sigma_px=cfg.sum_sigma_px,
-                           converged_steps=PRECISE_STEPS if cfg.estimate_height else CONVERGED_STEPS, **kwargs)
+                           converged_steps=PRECISE_STEPS if cfg.estimate_height else CONVERGED_STEPS,
+                           model_sigma_px=cfg.model_sigma_px, **kwargs)
 
         if not cfg.estimate_height:
             # Its height given: its size and side shades lent; what the view tells of the shades goes
