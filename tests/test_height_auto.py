@@ -2,7 +2,7 @@
 (tracker/height.py), against exact truth on rendered boxes; and the vote itself on made-up views.
 
 Measured on these scenes (480x360, 80x50 mm parts crossing the view while turning, rendered with
-BOX_SUPERSAMPLE): once converged (after 10-19 % of the crossing), the height within 0.28 mm at worst
+BOX_SUPERSAMPLE): once converged (after 10-22 % of the crossing), the height within 0.36 mm at worst
 and the centroid within 0.01-0.05 mm on average; flat parts flat in every converged frame.
 """
 
