@@ -8,8 +8,9 @@ up. Here every view of bench/heights.py's boxes (and 8 and 15 mm, heights the vo
 given its true height as the track's, and its own reading is compared with the truth. Views that
 tell the height less surely than track.view_height_told_sigma_mm (they show hardly any side) are
 left out, as the track leaves them out. Prints, per scene, how many views tell it, the median and 90th
-percentile of their errors, and how many claim to be sure (1 sigma within 0.3 mm) but are 1 mm off or
-more: what the track's estimate cannot average away.
+percentile of their errors, how many claim to be sure (1 sigma within 0.3 mm) but are 1 mm off or
+more (what the track's estimate cannot average away), and each view's error over the sigma it claims:
+its median (a normal's: 0.67) and how many are beyond 3 (a normal's: 0.3 %).
 """
 
 from __future__ import annotations
@@ -49,7 +50,9 @@ def view_errors(height_mm: float, tilt_deg: float) -> dict:
             "median_mm": float(np.median(err)) if len(err) else float("nan"),
             "p90_mm": float(np.percentile(err, 90)) if len(err) else float("nan"),
             "mean_mm": float(np.mean(errors)) if len(err) else float("nan"),
-            "sure_but_off": int(np.sum((sig <= _SURE_MM) & (err >= _OFF_MM)))}
+            "sure_but_off": int(np.sum((sig <= _SURE_MM) & (err >= _OFF_MM))),
+            "ratio_median": float(np.median(err / sig)) if len(err) else float("nan"),
+            "beyond_3": int(np.sum(err > 3.0 * sig))}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -62,11 +65,11 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(rows, indent=1))
         return 0
     print("| box, camera tilt | views telling the height | error median / p90 (mm) | mean (mm) "
-          f"| sure to {_SURE_MM} mm but {_OFF_MM} mm off |")
-    print("|---|---|---|---|---|")
+          f"| sure to {_SURE_MM} mm but {_OFF_MM} mm off | error / claimed sigma: median, beyond 3 |")
+    print("|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['scene']} | {r['views']} | {r['median_mm']:.2f} / {r['p90_mm']:.2f} | {r['mean_mm']:+.2f} "
-              f"| {r['sure_but_off']} |")
+              f"| {r['sure_but_off']} | {r['ratio_median']:.2f}, {r['beyond_3']} |")
     return 0
 
 
