@@ -23,7 +23,8 @@ size. The estimate has two stages.
 2. **Refine.** Otherwise each later view is measured as a box of the estimated height, its size lent
    (its pose), and fitted once more from there with its height and size free, nothing lent (lent the
    track's size, a view reads back the height it is lent): what that view tells of (length, width,
-   height) on its own (``boxfit.view_information``) adds to the estimate. A view
+   height) on its own (``boxfit.view_information``, as unsure as the box model's own error leaves it:
+   ``measure.model_sigma_px``) adds to the estimate. A view
    that tells the height alone (its size marginalised out) less surely than
    ``track.view_height_told_sigma_mm`` adds nothing to it: it shows hardly any side face, and tells the
    height only from the part's apparent size, which the same small bias of the edges moves by
