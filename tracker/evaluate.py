@@ -134,7 +134,7 @@ def own_height_readings(pipeline: Pipeline, scene: SceneSpec, frames: Iterable[t
     surer than track.view_height_told_sigma_mm). ``frames``: (image, truth) of ``scene`` in order, which
     ``pipeline`` processes too (its segmentation and belt reference as a run's)."""
     # The measurement's modules only here: `tracker evaluate` reads pose files and needs none.
-    from tracker.height import _height_information  # noqa: PLC0415
+    from tracker.height import height_information  # noqa: PLC0415
     from tracker.measure import KnownPart  # noqa: PLC0415
 
     told = pipeline.config.track.view_height_told_sigma_mm**-2
@@ -149,7 +149,7 @@ def own_height_readings(pipeline: Pipeline, scene: SceneSpec, frames: Iterable[t
                     default=None)
             if m is not None and not m.clipped and m.shape_info is not None:
                 # The height alone, the size marginalised out (as the track judges a view).
-                information = _height_information(m.shape_info)
+                information = height_information(m.shape_info)
                 if information >= told:
                     readings.append((float(np.linalg.solve(m.shape_info, m.shape_vec)[2]) - height_mm,
                                      float(information**-0.5)))

@@ -401,7 +401,7 @@ class HeightEstimate:
             return
         # A view that tells its height from its apparent size alone (track.view_height_told_sigma_mm) adds
         # nothing to the estimate; it still tells whether the estimate is wrong (its size along its valley).
-        weak = not _height_information(info) >= self._cfg.view_height_told_sigma_mm**-2
+        weak = not height_information(info) >= self._cfg.view_height_told_sigma_mm**-2
         # The view's uncertainty widened by the floor: (I + info . floor)^-1 scales both parts alike.
         damp = np.linalg.inv(np.eye(3) + info @ self._view_floor_mm2)
         info, vec = 0.5 * (damp @ info + (damp @ info).T), damp @ vec
@@ -485,7 +485,7 @@ def _disagreement(infos: np.ndarray, vecs: np.ndarray, others_info: np.ndarray,
     return np.einsum("vi,vij,vj->v", residual, np.linalg.pinv(spread), residual)
 
 
-def _height_information(info: np.ndarray) -> float:
+def height_information(info: np.ndarray) -> float:
     """What a view's information on (length, width, height) tells of the height alone, its size
     marginalised out (a Schur complement; 1/mm^2, 0 or less: nothing)."""
     size, cross = info[:2, :2], info[:2, 2]
