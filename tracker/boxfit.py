@@ -451,14 +451,17 @@ def view_information(jac: np.ndarray, r: np.ndarray, params: np.ndarray, rms: fl
         rest = jac[:, :_H]
         lone = jac[:, _H] - rest @ np.linalg.lstsq(rest, jac[:, _H], rcond=None)[0]
         lever_mm_px = float(np.sum(np.abs(lone))) / max(float(np.sum(lone**2)), 1e-12)
-        # The height's variance widened by (model_sigma_px * lever)^2, in information form (Sherman-Morrison:
-        # the view's valley, a singular information, stays as it is along the size).
-        widen = (model_sigma_px * lever_mm_px) ** 2
-        towards = info[:, 2]
-        damp = np.eye(3) - widen * np.outer(towards, [0.0, 0.0, 1.0]) / (1.0 + widen * info[2, 2])
-        info, vec = damp @ info, damp @ vec
-        info = 0.5 * (info + info.T)
+        info, vec = widened(info, vec, np.diag([0.0, 0.0, (model_sigma_px * lever_mm_px) ** 2]))
     return info, vec
+
+
+def widened(info: np.ndarray, vec: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """An information matrix and vector whose estimate is the less sure by the covariance ``cov``
+    added to it: (I + info . cov)^-1 applied to both, in information form, so that a singular
+    information (a view's valley) stays as it is where ``cov`` does not reach."""
+    damp = np.linalg.inv(np.eye(len(info)) + info @ cov)
+    info = damp @ info
+    return 0.5 * (info + info.T), damp @ vec
 
 
 def _size_covariance(normal_inv: np.ndarray, free: list[int], rms: float) -> np.ndarray:

@@ -52,6 +52,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tracker.boxfit import ViewShades, widened
 from tracker.config import TrackConfig
 from tracker.geometry import Rect, wrap_angle_deg
 
@@ -65,7 +66,6 @@ _SHAPE_DOF = 3.0
 _JUDGED_VIEWS = 64
 
 if TYPE_CHECKING:
-    from tracker.boxfit import ViewShades
     from tracker.measure import Measurement
 
 
@@ -402,9 +402,8 @@ class HeightEstimate:
         # A view that tells its height from its apparent size alone (track.view_height_told_sigma_mm) adds
         # nothing to the estimate; it still tells whether the estimate is wrong (its size along its valley).
         weak = not height_information(info) >= self._cfg.view_height_told_sigma_mm**-2
-        # The view's uncertainty widened by the floor: (I + info . floor)^-1 scales both parts alike.
-        damp = np.linalg.inv(np.eye(3) + info @ self._view_floor_mm2)
-        info, vec = 0.5 * (damp @ info + (damp @ info).T), damp @ vec
+        # The view's uncertainty widened by the floor.
+        info, vec = widened(info, vec, self._view_floor_mm2)
         # The view against the estimate (see _disagreement), as its views claim it, not widened by their
         # spread: widened, it would let in the very views that scatter, and a wrong estimate would never
         # be voted on again.
