@@ -50,7 +50,7 @@ def _auto(height_mm: float, tilt_deg: float, **measure) -> list[tuple[dict, dict
 # crossing, 1.16 mm off), and since views that tell their height only from the part's apparent size
 # are left out (track.view_height_told_sigma_mm); 5 mm straight down since the scenes are rendered
 # with BOX_SUPERSAMPLE (0.68 mm off once converged at 4x4 samples: its slivers read the sampling's
-# errors; 0.07 now). 8 mm straight down is a height the vote does not try (0.31 mm off at worst).
+# errors; 0.07 now). 8 mm straight down lies between heights the vote tries (7.5 and 10).
 @pytest.mark.parametrize("height_mm,tilt_deg", [(5, 0), (5, 10), (5, 20), (8, 0), (10, 0), (10, 10), (10, 20),
                                                 (20, 0), (20, 10), (20, 20), (60, 0), (60, 10), (60, 20)])
 def test_auto_estimates_a_box_height(height_mm, tilt_deg):
@@ -92,6 +92,28 @@ def test_auto_finds_a_flat_part_flat(tilt_deg):
     before = [centroid_error_mm(o, t) for o, t in frames if not o["height_converged"]]
     assert np.mean(before) <= 1.0, before
 
+
+
+def test_a_part_between_the_heights_tried_is_not_found_flat():
+    """A 7.3 mm box entering a view tilted 20 deg at its edge (bench/heights_random.py --any-height's scene
+    56): one view's boxes fit it well only within a millimetre of its height, worse than flat 1.3 mm off
+    either way. With 5 and 10 mm the nearest heights tried, flat led its first three views by the margin
+    and it was measured flat for good, 2-3 mm off; with 7.5 tried too (measure.height_starts_mm) it
+    converged after 12 of its 88 frames, within 0.1 mm."""
+    cam = CameraSpec(width=640, height=480, focal_px=535.5, principal_offset_px=(2.5, 2.9), height_mm=738.2,
+                     tilt_deg=20.0, yaw_deg=6.8)
+    part = PartSpec(71.3, 44.1, 7.3, -457.4, 10.3, -52.7, 337.9, 0.6, omega_deg_s=-12.6, intensity=194.0)
+    # Its first third (88 frames cross the view).
+    scene = SceneSpec(cam, (part,), fps=30, n_frames=29, supersample=BOX_SUPERSAMPLE, blur_samples=3,
+                      belt_level=52.6, seed=56)
+    poses, truths = run_pipeline(scene, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
+    frames = own_track(part_views(poses, truths, 0))
+    assert len(frames) >= 20
+    assert not any(o["height_converged"] and o["height_mm"] == 0.0 for o, _ in frames), "found flat"
+    after = [(o, t) for o, t in frames if o["height_converged"]]
+    assert after, [o["height_mm"] for o, _ in frames]
+    assert max(abs(o["height_mm"] - part.height_mm) for o, _ in after) <= 0.5, [o["height_mm"] for o, _ in after]
+    assert np.mean([centroid_error_mm(o, t) for o, t in after]) <= 0.2
 
 def _view(x_mm: float, sizes_mm: dict[float, float], flat_length_mm: float = 80.0,
           outside_mm: tuple[float, ...] = (), rms_px: dict[float, float] | None = None,
@@ -616,9 +638,10 @@ def test_flat_parts_on_a_textured_moving_belt_keep_their_tracks_and_flat_poses()
     """The flat parts of tests/test_textured_knurl.py (a knurl moving with them, 320x240) with auto:
     there 0 and 5 mm score alike (the README says so), and while flat leads the vote the part's pose
     is its flat measurement, moved into the belt's frame like the rest of it. Measured: one track per
-    part; in the 39 frames reported at height 0 the centroid 0.03 mm off on average, as in flat mode;
-    0.36 mm over all frames, from those where 5 mm leads the vote. (Before the box's edge windows too
-    near the knurl's level were left out, 18 frames at 0.27 mm: most fell back to the staircase.)"""
+    part; in the 27 frames reported at height 0 the centroid 0.04 mm off on average, as in flat mode;
+    0.1-1.6 mm in the frames before, where 7.5 mm or 5 mm leads the vote. (Before the box's edge windows
+    too near the knurl's level were left out, 18 frames at 0.27 mm: most fell back to the staircase;
+    before 7.5 mm was tried, 39 frames, the second part's first votes leading flat for 5 of them.)"""
     scene = knurl_scene()
     renderer, frames = rendered(scene)
     config = TrackerConfig(segment=SegmentConfig(model="textured"), measure=MeasureConfig(estimate_height=True))
@@ -630,7 +653,7 @@ def test_flat_parts_on_a_textured_moving_belt_keep_their_tracks_and_flat_poses()
         for o in pose["objects"]:
             if o["measured"] and o["height_mm"] == 0.0:
                 flat.append(min(centroid_error_mm(o, t) for t in truth["objects"] if t is not None))
-    assert len(flat) >= 30 and np.mean(flat) <= 0.1, flat
+    assert len(flat) >= 20 and np.mean(flat) <= 0.1, flat
 
 
 def test_a_young_track_votes_only_with_views_that_count():
