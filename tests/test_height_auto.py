@@ -93,7 +93,6 @@ def test_auto_finds_a_flat_part_flat(tilt_deg):
     assert np.mean(before) <= 1.0, before
 
 
-
 def test_a_part_between_the_heights_tried_is_not_found_flat():
     """A 7.3 mm box entering a view tilted 20 deg at its edge (bench/heights_random.py --any-height's scene
     56): one view's boxes fit it well only within a millimetre of its height, worse than flat 1.3 mm off
@@ -114,6 +113,7 @@ def test_a_part_between_the_heights_tried_is_not_found_flat():
     assert after, [o["height_mm"] for o, _ in frames]
     assert max(abs(o["height_mm"] - part.height_mm) for o, _ in after) <= 0.5, [o["height_mm"] for o, _ in after]
     assert np.mean([centroid_error_mm(o, t) for o, t in after]) <= 0.2
+
 
 def _view(x_mm: float, sizes_mm: dict[float, float], flat_length_mm: float = 80.0,
           outside_mm: tuple[float, ...] = (), rms_px: dict[float, float] | None = None,
