@@ -447,7 +447,7 @@ def view_information(jac: np.ndarray, r: np.ndarray, params: np.ndarray, rms: fl
     info, reduced_grad = marginalised(jac.T @ jac, jac.T @ r, shape, [0, 1, 2])
     variance = max(rms, 1e-6) ** 2
     info, vec = info / variance, (info @ params[shape] - reduced_grad) / variance
-    if model_sigma_px > 0 and jac.shape[1] > _H:
+    if model_sigma_px > 0:
         rest = jac[:, :_H]
         lone = jac[:, _H] - rest @ np.linalg.lstsq(rest, jac[:, _H], rcond=None)[0]
         lever_mm_px = float(np.sum(np.abs(lone))) / max(float(np.sum(lone**2)), 1e-12)

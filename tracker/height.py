@@ -52,7 +52,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tracker.boxfit import ViewShades, widened
+from tracker.boxfit import ViewShades, marginalised, widened
 from tracker.config import TrackConfig
 from tracker.geometry import Rect, wrap_angle_deg
 
@@ -487,9 +487,7 @@ def _disagreement(infos: np.ndarray, vecs: np.ndarray, others_info: np.ndarray,
 def height_information(info: np.ndarray) -> float:
     """What a view's information on (length, width, height) tells of the height alone, its size
     marginalised out (a Schur complement; 1/mm^2, 0 or less: nothing)."""
-    size, cross = info[:2, :2], info[:2, 2]
-    with np.errstate(all="ignore"):
-        return float(info[2, 2] - cross @ np.linalg.lstsq(size, cross, rcond=None)[0])
+    return float(marginalised(info, np.zeros(3), [2], [0, 1])[0][0, 0])
 
 
 def _rect_at(trials: tuple[HeightTrial, ...], height_mm: float) -> Rect | None:
