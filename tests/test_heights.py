@@ -290,14 +290,28 @@ def test_views_of_a_thin_box_from_above_claim_no_surer_a_height_than_they_read(h
     pixel wide, and a view's height rests on a few windows across them that move it by tens of mm per
     pixel: the model's own error of a few hundredths of a pixel there (measure.model_sigma_px) reads as
     millimetres, and the view says so. Each view given the true height as its track's, its error over
-    the 1 sigma it claims: about a normal's (median 0.4-0.5 measured; 0.67 for a normal), and rarely
-    beyond 3. Without the model's error the views claimed 0.1-0.4 mm where they read up to 14 mm off
-    (median 1.65, a quarter of them beyond 3)."""
+    the 1 sigma it claims: about a normal's (median 0.28-0.40 measured; 0.67 for a normal), and rarely
+    beyond 3. Views that tell the height as the track counts them: 27 of the 5 mm box's (30 or more
+    until a window's sum at a face's corner was its strip's area), 45 of the 10 mm box's. Without the
+    model's error the views claimed 0.1-0.4 mm where they read up to 14 mm off (median 1.65, a quarter
+    of them beyond 3)."""
     scene = _box_scene(height_mm, 0.0)
     renderer, frames = rendered(scene)
     pipeline = Pipeline(renderer.calibration, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
     readings = own_height_readings(pipeline, scene, frames, height_mm)
-    assert len(readings) >= 30, len(readings)
+    assert len(readings) >= 25, len(readings)
     ratios = np.array([abs(error) / sigma for error, sigma in readings])
     assert np.median(ratios) <= 1.0, np.round(readings, 2)
     assert np.mean(ratios > 3.0) <= 0.05, np.round(readings, 2)
+
+
+def test_a_window_at_a_corner_sums_its_strip_of_pixels():
+    """Where a face's corner lies in a window's strip of pixels, the pixels sum the strip's area inside
+    the face, not the length of its middle line: a diamond face's apex (5, 10), a window down its
+    middle column from y = 8 holds 1.75 px of it (2.0 along its middle line); beside it, where the
+    diamond's edge crosses the strip straight, both are 2.0."""
+    diamond = np.array([[[[5.0, 0.0], [10.0, 5.0], [5.0, 10.0], [0.0, 5.0]]]])
+    windows = EdgeWindows(np.array([[5.0, 8.0], [3.0, 6.0]]), np.array([[0.0, 1.0]] * 2), np.zeros(2), 6.0,
+                          (1.0, 2.0))
+    whole, _ = lengths_in_faces(windows, diamond)
+    assert np.allclose(whole[0, :, 0], [1.75, 2.0], atol=1e-12)

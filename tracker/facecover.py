@@ -59,37 +59,66 @@ def clip(polygons, inner, step, span, level_from, level_to, blur, total, level):
                         level[p, n, f] += 0.5 * share / (level_to - level_from)
                     continue
                 total[p, n, f] = max(min(hi, span) - max(lo, 0.0), 0.0)
-                # The level pixel: a square along the window (the lens locally conformal), clipped to the face.
-                count = 4
-                for c in range(4):
-                    s_along = level_from if c in (0, 3) else level_to
-                    s_across = -0.5 if c < 2 else 0.5
-                    square[c, 0] = qx + s_along * dx - s_across * dy
-                    square[c, 1] = qy + s_along * dy + s_across * dx
-                # Most level pixels lie wholly inside a face or wholly outside one of its edges: no cut.
-                inside, outside = True, False
-                for k in range(4):
-                    below = above = 0
-                    for c in range(4):
-                        d = normal[k, 0] * square[c, 0] + normal[k, 1] * square[c, 1] - offset[k]
-                        below += d <= 0
-                        above += d >= 0
-                    inside = inside and below == 4
-                    outside = outside or above == 4
-                if inside or outside:
-                    level[p, n, f] = 1.0 if inside else 0.0
-                    continue
-                for k in range(4):
-                    count = _cut(square, spare, count, normal[k, 0], normal[k, 1], offset[k])
-                    square, spare = spare, square
-                    if count == 0:
-                        break
-                area = 0.0
-                for c in range(count):
-                    j = (c + 1) % count
-                    area += square[c, 0] * square[j, 1] - square[j, 0] * square[c, 1]
-                pixel = (level_to - level_from) * (dx * dx + dy * dy)
-                level[p, n, f] = min(abs(area) / 2.0 / pixel, 1.0) if pixel > 0 else 0.0
+                if _corner_in_strip(a, qx, qy, dx, dy, span):
+                    # The window's pixels sum the area of their strip inside the face; its middle line's
+                    # length is that area only where the face's edges cross the strip straight.
+                    total[p, n, f] = _strip_area(normal, offset, qx, qy, dx, dy, 0.0, span, square, spare)
+                # The level pixel: a square along the window, clipped to the face.
+                level[p, n, f] = _strip_area(normal, offset, qx, qy, dx, dy, level_from, level_to, square,
+                                             spare) / (level_to - level_from)
+
+
+@numba.njit(cache=True)
+def _corner_in_strip(a, qx, qy, dx, dy, span):  # pragma: no cover (compiled)
+    """Whether a corner of the face (polygon ``a``) lies in the window's strip of pixels (half a pixel
+    either side of its line, and half a pixel beyond its ends): there the pixels' sum and the length of
+    the line differ (at a flat part's sharp corner by 0.2-0.3 px, bench/heights_random.py scene 106;
+    its fit's RMS 0.027 -> 0.009 px, noiseless). Edges across the strip's ends are left to the line: with
+    them summed as areas too, a 60 mm box's views read its height 0.3 mm low on average (the tests' box
+    at 10 deg, four noise seeds)."""
+    d2 = dx * dx + dy * dy
+    for k in range(4):
+        wx, wy = a[k, 0] - qx, a[k, 1] - qy
+        along = (wx * dx + wy * dy) / d2
+        across = (dx * wy - dy * wx) / d2
+        if abs(across) <= 0.5 and -0.5 <= along <= span + 0.5:
+            return True
+    return False
+
+
+@numba.njit(cache=True)
+def _strip_area(normal, offset, qx, qy, dx, dy, a_from, a_to, square, spare):  # pragma: no cover (compiled)
+    """The area (px^2) of the rectangle from ``a_from`` to ``a_to`` px along the window's line and half a
+    pixel either side of it (the lens locally conformal) inside the convex polygon (normal . x <= offset)."""
+    for c in range(4):
+        s_along = a_from if c in (0, 3) else a_to
+        s_across = -0.5 if c < 2 else 0.5
+        square[c, 0] = qx + s_along * dx - s_across * dy
+        square[c, 1] = qy + s_along * dy + s_across * dx
+    # Most lie wholly inside a face or wholly outside one of its edges: no cut.
+    inside, outside = True, False
+    for k in range(4):
+        below = above = 0
+        for c in range(4):
+            d = normal[k, 0] * square[c, 0] + normal[k, 1] * square[c, 1] - offset[k]
+            below += d <= 0
+            above += d >= 0
+        inside = inside and below == 4
+        outside = outside or above == 4
+    if inside or outside:
+        return (a_to - a_from) if inside else 0.0
+    count = 4
+    for k in range(4):
+        count = _cut(square, spare, count, normal[k, 0], normal[k, 1], offset[k])
+        square, spare = spare, square
+        if count == 0:
+            return 0.0
+    area = 0.0
+    for c in range(count):
+        j = (c + 1) % count
+        area += square[c, 0] * square[j, 1] - square[j, 0] * square[c, 1]
+    d2 = dx * dx + dy * dy
+    return min(abs(area) / 2.0 / d2, a_to - a_from) if d2 > 0 else 0.0
 
 
 @numba.njit(cache=True)
