@@ -77,6 +77,8 @@ def _corner_in_strip(a, qx, qy, dx, dy, span):  # pragma: no cover (compiled)
     them summed as areas too, a 60 mm box's views read its height 0.3 mm low on average (the tests' box
     at 10 deg, four noise seeds)."""
     d2 = dx * dx + dy * dy
+    if d2 <= 0:
+        return False  # a window of no length has no strip (as _strip_area reads it: no area)
     for k in range(4):
         wx, wy = a[k, 0] - qx, a[k, 1] - qy
         along = (wx * dx + wy * dy) / d2
