@@ -31,6 +31,8 @@ from tracker.undistort import BeltMapper
     ({"roi_px": [[0, 0], [9, 0], [9, 9]], "roi_mm": [[0, 0], [9, 0], [9, 9]]}, "expected roi_px or roi_mm, not both"),
     ({"scene_fault_fraction": 1.5}, "segment.scene_fault_fraction: expected 0 < f <= 1"),
     ({"roi_px": 3}, "segment.roi_px: expected a list"),
+    ({"faint_threshold": -1}, "segment.faint_threshold: expected >= 0"),
+    ({"faint_threshold": 12.5}, "segment.faint_threshold: expected an integer"),
 ])
 def test_bad_segment_settings_are_one_clear_line(segment, message):
     with pytest.raises(BadInput, match=message.replace("[", r"\[").replace("]", r"\]")):

@@ -191,6 +191,27 @@ def test_a_shape_that_is_no_boxes_is_kept_whole_and_unclean():
     assert len(split.pieces) == 1 and not split.clean
 
 
+def test_a_blob_of_many_notches_is_kept_whole_after_a_bounded_search(monkeypatch):
+    # A ragged blob (the plain belt model on a knurled belt joins parts and belt into such shapes): every
+    # cut leaves pieces with notches of their own, and the search for boxes branches at each.
+    mask = np.zeros((240, 320), dtype=np.uint8)
+    rng = np.random.default_rng(5)
+    for x in range(30, 290, 12):
+        top, bottom = int(rng.integers(30, 80)), int(rng.integers(160, 210))
+        mask[top:bottom, x:x + 8] = 255
+    mask[110:130, 30:290] = 255  # joined into one blob along a bar
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    assert len(contours) == 1
+    import tracker.split as split_module
+
+    cuts = []
+    components = split_module._components
+    monkeypatch.setattr(split_module, "_components", lambda *a: cuts.append(1) or components(*a))
+    split = split_blob(contours[0], RULE)
+    assert len(split.pieces) == 1 and not split.clean
+    assert 0 < len(cuts) <= RULE.max_cuts, len(cuts)
+
+
 def test_the_status_line_says_not_pickable_and_a_settling_height():
     import dataclasses
 

@@ -18,6 +18,10 @@ SEGMENT_MODELS = ("reference", "textured")
 class SegmentConfig:
     # |frame - background| above this (grey levels) is foreground.
     diff_threshold: int = 30
+    # ... and above this where it joins foreground 3 px wide or more (hysteresis): a box's side face in
+    # shadow can differ from the belt by less than diff_threshold and still be the part's (its
+    # silhouette's outer edge). 0 (or diff_threshold and above): none joins.
+    faint_threshold: int = 12
     # |frame - previous frame| above this is motion; background learns only where still.
     motion_threshold: int = 12
     # Learning rate of the empty-belt reference where nothing moves.
@@ -74,6 +78,8 @@ class SegmentConfig:
                   "textured_threshold", "textured_sigmas", "min_part_contrast")
         if self.model not in SEGMENT_MODELS:
             raise BadInput(f"segment.model: expected one of {list(SEGMENT_MODELS)}, got {self.model!r}")
+        if self.faint_threshold < 0:
+            raise BadInput(f"segment.faint_threshold: expected >= 0 (0: none joins), got {self.faint_threshold}")
         if self.roi_px and self.roi_mm:
             raise BadInput("segment: expected roi_px or roi_mm, not both")
         for name in ("roi_px", "roi_mm"):
@@ -109,7 +115,8 @@ class MeasureConfig:
     roi_margin_px: int = 4
     # Points within this many pixels of a fitted side (and away from corners) refine it.
     side_band_px: float = 1.5
-    # Minimum |part - belt| contrast (grey levels) for a sub-pixel measurement.
+    # Minimum |part - belt| contrast (grey levels) for a sub-pixel measurement; on the plain belt model
+    # no more than segment.faint_threshold (a face it joins to a part is read).
     min_contrast: float = 20.0
     # A box's edges are read against the face next to each (one pixel): windows where the belt comes
     # within min_contrast of it are left out, up to this fraction of those on one side of the blob (its

@@ -60,7 +60,12 @@ class Pipeline:
         self.roi_mask = None if self.roi_px is None else roi
         self.segmenter = make_segmenter(seg, roi, calibration.mm_per_px_at_centre())
         self.mapper = mapper = BeltMapper(calibration, self.config.measure.part_height_mm)
-        self.measurer = Measurer(mapper, self.config.measure, _TEXTURE_BLUR_PX if seg.model == "textured" else 0.0)
+        measure = self.config.measure
+        if seg.model == "reference" and 0 < seg.faint_threshold < measure.min_contrast:
+            # The faint faces the plain belt model joins to a part are read too (on a textured belt the
+            # knurl comes near a face, and min_contrast keeps those windows out).
+            measure = dataclasses.replace(measure, min_contrast=float(seg.faint_threshold))
+        self.measurer = Measurer(mapper, measure, _TEXTURE_BLUR_PX if seg.model == "textured" else 0.0)
         # The belt's own motion is measured where the belt model needs it (textured belts).
         self.motion = BeltMotion(roi) if seg.model == "textured" else None
         self._roi_centre_px = np.array(cv2.boundingRect(roi), dtype=np.float64)

@@ -32,6 +32,10 @@ class SplitRule:
     # Pieces smaller than this (px) are slivers of the cut, not parts.
     min_area_px: float
     max_pieces: int = 6
+    # At most this many cuts are tried per blob: the search for pieces branches at every cut, and a blob
+    # with dozens of notches (a textured belt's knurl joined to a part under the plain belt model) cost
+    # 10 s of one frame. A few touching boxes need a handful; beyond, the blob is returned whole.
+    max_cuts: int = 64
     # A piece fills at least this fraction of its minimum-area rectangle: a box seen from any side
     # does (its silhouette is a rectangle or a hexagon), and so does the corner of a box lying across
     # another one (a triangle at worst); a thin curved piece of a ring or of a bag may not.
@@ -51,13 +55,14 @@ def split_blob(contour: np.ndarray, rule: SplitRule) -> Split:
     x, y, w, h = cv2.boundingRect(contour)
     mask = np.zeros((h + 2, w + 2), dtype=np.uint8)
     cv2.drawContours(mask, [contour], -1, 255, cv2.FILLED, offset=(1 - x, 1 - y))
-    pieces = _cut_until_convex(mask, rule, depth=0)
+    pieces = _cut_until_convex(mask, rule, depth=0, budget=[rule.max_cuts])
     if pieces is None or not 2 <= len(pieces) <= rule.max_pieces:
         return Split((contour,), False)
     return Split(tuple(p + (x - 1, y - 1) for p in pieces), True)
 
 
-def _cut_until_convex(mask: np.ndarray, rule: SplitRule, depth: int) -> list[np.ndarray] | None:
+def _cut_until_convex(mask: np.ndarray, rule: SplitRule, depth: int, budget: list[int]) -> list[np.ndarray] | None:
+    """``mask``'s convex pieces, or None; ``budget``: the cuts the whole search may still try (shared)."""
     contours = _pieces(mask, rule)
     if len(contours) != 1:
         return None
@@ -67,6 +72,9 @@ def _cut_until_convex(mask: np.ndarray, rule: SplitRule, depth: int) -> list[np.
     if depth >= rule.max_pieces - 1:
         return None
     for cut in _cuts(contour, mask, rule):
+        if budget[0] <= 0:
+            return None
+        budget[0] -= 1
         halves = mask.copy()
         cv2.line(halves, cut[0], cut[1], 0, thickness=2)
         parts = _components(halves, rule)
@@ -74,7 +82,7 @@ def _cut_until_convex(mask: np.ndarray, rule: SplitRule, depth: int) -> list[np.
             continue
         out = []
         for part in parts:
-            sub = _cut_until_convex(part, rule, depth + 1)
+            sub = _cut_until_convex(part, rule, depth + 1, budget)
             if sub is None:
                 break
             out.extend(sub)
