@@ -36,7 +36,8 @@ def test_a_faint_face_joins_the_part_it_touches_and_nothing_else_does():
     top, side = (100, 60, 180, 120), (180, 60, 186, 120)  # a side face 6 px wide on the top's right
     fringe = (100, 120, 180, 121)  # one row along the top's lower edge: a blurred edge's pixels
     stain = (30, 150, 60, 180)  # a faint patch on its own
-    frame = _frame(rng, (top, BRIGHT), (side, FAINT), (fringe, FAINT), (stain, FAINT))
+    shadow = (94, 60, 100, 120)  # the bright part's shadow on its left, faintly darker than the belt
+    frame = _frame(rng, (top, BRIGHT), (side, FAINT), (fringe, FAINT), (stain, FAINT), (shadow, -FAINT))
     mask = _mask(SegmentConfig(), frame, rng)
 
     def share(box: tuple[int, int, int, int]) -> float:
@@ -47,8 +48,16 @@ def test_a_faint_face_joins_the_part_it_touches_and_nothing_else_does():
     assert share(side) >= 0.97, "the faint side face is the part's"
     assert share(stain) == 0.0, "a faint patch touching no part is belt"
     assert share(fringe) == 0.0, "a sharp edge's faint row stays out: its window would move out"
+    assert share(shadow) == 0.0, "a bright part's faint shadow is belt"
     # Without faint faces (the threshold alone) the side is lost.
     assert _mask(SegmentConfig(faint_threshold=0), frame, rng)[60:120, 180:186].mean() < 0.05
+
+
+def test_a_dark_part_joins_its_faint_dark_face():
+    rng = np.random.default_rng(9)
+    top, side = (100, 60, 180, 120), (180, 60, 186, 120)
+    mask = _mask(SegmentConfig(), _frame(rng, (top, -60), (side, -FAINT)), rng)
+    assert mask[60:120, 100:180].all() and mask[60:120, 180:186].mean() >= 0.97
 
 
 def _dark_sided_box() -> SceneSpec:

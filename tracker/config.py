@@ -18,9 +18,9 @@ SEGMENT_MODELS = ("reference", "textured")
 class SegmentConfig:
     # |frame - background| above this (grey levels) is foreground.
     diff_threshold: int = 30
-    # ... and above this where it joins foreground 3 px wide or more (hysteresis): a box's side face in
-    # shadow can differ from the belt by less than diff_threshold and still be the part's (its
-    # silhouette's outer edge). 0 (or diff_threshold and above): none joins.
+    # ... and above this where it joins foreground on the same side of the belt's level, 2 px wide or more
+    # (hysteresis): a box's side face in shadow can differ from the belt by less than diff_threshold and
+    # still be the part's (its silhouette's outer edge). 0 (or diff_threshold and above): none joins.
     faint_threshold: int = 12
     # |frame - previous frame| above this is motion; background learns only where still.
     motion_threshold: int = 12

@@ -61,9 +61,8 @@ class Segmenter:
         if self.reference is None:
             self._first(frame)
             return np.zeros(frame.shape, dtype=np.uint8)
-        diff = cv2.absdiff(frame, self.background)
         # The faint faces of parts too: the reference learns none of them either.
-        fg = self._with_faint(diff, cv2.threshold(diff, cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1])
+        fg = self._with_faint(frame, self.background)
         if self._suspect is not None:
             fg = self._start_up(frame, fg)
         mask = cv2.morphologyEx(fg, cv2.MORPH_OPEN, self._kernel)
@@ -74,28 +73,37 @@ class Segmenter:
         self._count += 1
         return mask
 
-    def _with_faint(self, diff: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        """``mask`` and the faint foreground (``diff`` above segment.faint_threshold) connected to it: a
-        box's side face in shadow is part of its silhouette, and left out, its outer edge is not where
-        the mask's boundary puts the windows that read it (bench/heights_random.py scene 11, a 20 mm
-        box at 20 deg whose long faces differ from the belt by 22 levels: its width 4.4-5.6 mm short
-        with the height given). Faint blobs alone stay belt (a stain, the belt's own shading)."""
-        if not 0 < self.config.faint_threshold < self.config.diff_threshold:
+    def _with_faint(self, frame: np.ndarray, belt: np.ndarray) -> np.ndarray:
+        """Foreground: ``frame`` more than segment.diff_threshold off ``belt``, and the faint pixels (more than
+        segment.faint_threshold off) connected to it on the same side of the belt's level. A box's side face
+        in shadow is part of its silhouette, and left out, its outer edge is not where the mask's boundary
+        puts the windows that read it (bench/heights_random.py scene 11, a 20 mm box at 20 deg whose long
+        faces differ from the belt by 22 levels: its width 4.4-5.6 mm short with the height given). A faint
+        region touching no foreground stays belt (a stain, the belt's own shading), and so does a bright
+        part's faint shadow (darker than the belt)."""
+        cfg = self.config
+        above = cv2.subtract(frame, belt)  # how much brighter than the belt (0 where darker)
+        below = cv2.subtract(belt, frame)
+        mask = cv2.bitwise_or(*(cv2.threshold(off, cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1]
+                                for off in (above, below)))
+        if not 0 < cfg.faint_threshold < cfg.diff_threshold:
             return mask
         # Only around the foreground (a faint face reaches at most _FAINT_REACH_PX past it).
         x, y, w, h = cv2.boundingRect(mask)
         if w == 0:
             return mask
         rows, cols = mask.shape
-        x0, y0 = max(x - _FAINT_REACH_PX, 0), max(y - _FAINT_REACH_PX, 0)
-        x1, y1 = min(x + w + _FAINT_REACH_PX, cols), min(y + h + _FAINT_REACH_PX, rows)
+        window = slice(max(y - _FAINT_REACH_PX, 0), min(y + h + _FAINT_REACH_PX, rows)), \
+            slice(max(x - _FAINT_REACH_PX, 0), min(x + w + _FAINT_REACH_PX, cols))
         out = mask.copy()
-        out[y0:y1, x0:x1] = self._joined(diff[y0:y1, x0:x1], mask[y0:y1, x0:x1])
+        out[window] = cv2.bitwise_or(*(self._joined(off[window], mask[window]) for off in (above, below)))
         return out
 
-    def _joined(self, diff: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        """_with_faint on a window of the frame."""
-        _, faint = cv2.threshold(diff, self.config.faint_threshold, 255, cv2.THRESH_BINARY)
+    def _joined(self, off: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """``mask`` (a window of the foreground) and the faint regions of ``off`` (how far each pixel is off
+        the belt on one side of its level) that touch its pixels as far off on that side."""
+        cfg = self.config
+        _, faint = cv2.threshold(off, cfg.faint_threshold, 255, cv2.THRESH_BINARY)
         # Only faint regions 2 px wide or more: a sharp edge's blurred pixels stay out (joined, they move the
         # edge's window out, and its face is read off a pixel the edge still crosses). A narrower side lies
         # within the window of the edge next to it.
@@ -105,15 +113,16 @@ class Segmenter:
         # its pixels in the opening, and its outline would be notched (and cut into pieces).
         for _ in range(_FAINT_GROW_PX):
             wide = cv2.bitwise_and(cv2.dilate(wide, _CROSS), alone)
-        # Each blob's faint region filled from a pixel of its own (a connected-components labelling and a
+        # Each blob's faint regions filled from a pixel of its own (a connected-components labelling and a
         # lookup by label cost 6 ms a frame at 1280x720, this 0.5).
-        contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        seeds = cv2.bitwise_and(mask, cv2.threshold(off, cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1])
+        contours, _ = cv2.findContours(seeds, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
         candidates = cv2.bitwise_or(wide, mask)
         filled = np.zeros((mask.shape[0] + 2, mask.shape[1] + 2), dtype=np.uint8)
         for contour in contours:
             x, y = contour[0, 0]
             cv2.floodFill(candidates, filled, (int(x), int(y)), 0, flags=8 | cv2.FLOODFILL_MASK_ONLY | (255 << 8))
-        return filled[1:-1, 1:-1]
+        return cv2.bitwise_or(filled[1:-1, 1:-1], mask)
 
     def _first(self, frame: np.ndarray) -> None:
         """The first frame is the reference, except where it is unlike the belt's level (its median over
@@ -123,10 +132,9 @@ class Segmenter:
         mostly belt (a region of interest would say where the belt is): the first frame as it is."""
         cfg = self.config
         level = np.full_like(frame, round(_median_level(frame, self._roi)))
-        diff = cv2.absdiff(frame, level)
         # With the faint faces next to it (see _with_faint): taken as belt, a dark side would stay in
         # the reference, and read against it the part's edges there would not be read.
-        suspect = self._with_faint(diff, cv2.threshold(diff, cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1])
+        suspect = self._with_faint(frame, level)
         if self._roi is not None:
             suspect = cv2.bitwise_and(suspect, self._roi)
         area = frame.size if self._roi is None else cv2.countNonZero(self._roi)
