@@ -26,6 +26,8 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench.py
 	$(BIN)/python bench/real_videos.py
 	$(BIN)/python bench/belt_motion.py
+	$(BIN)/python bench/faint_faces.py
+	$(BIN)/python bench/faint_faces.py --parts 5
 	$(BIN)/python bench/heights.py
 	$(BIN)/python bench/heights_random.py
 	$(BIN)/python bench/heights_random.py --any-height

@@ -23,7 +23,7 @@ _GHOST_RING_PX = _GUARD_PX
 # and grow back this far over the faint pixels next to them.
 _FAINT_WIDE = cv2.getStructuringElement(cv2.MORPH_RECT, (2, 2))
 _FAINT_GROW_PX = 2
-# ... and reach at most this far (px) past the foreground's bounding box.
+# ... and reach at most this far (px) past a blob's bounding box.
 _FAINT_REACH_PX = 64
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
 # How far around each pixel of the first frame's suspect region the belt is carried in from (px).
@@ -88,21 +88,24 @@ class Segmenter:
                                 for off in (above, below)))
         if not 0 < cfg.faint_threshold < cfg.diff_threshold:
             return mask
-        # Only around the foreground (a faint face reaches at most _FAINT_REACH_PX past it).
-        x, y, w, h = cv2.boundingRect(mask)
-        if w == 0:
-            return mask
+        # Only around each blob (a faint face reaches at most _FAINT_REACH_PX past its bounding box).
         rows, cols = mask.shape
-        window = slice(max(y - _FAINT_REACH_PX, 0), min(y + h + _FAINT_REACH_PX, rows)), \
-            slice(max(x - _FAINT_REACH_PX, 0), min(x + w + _FAINT_REACH_PX, cols))
         out = mask.copy()
-        out[window] = cv2.bitwise_or(*(self._joined(off[window], mask[window]) for off in (above, below)))
+        for contour in cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0]:
+            x, y, w, h = cv2.boundingRect(contour)
+            window = slice(max(y - _FAINT_REACH_PX, 0), min(y + h + _FAINT_REACH_PX, rows)), \
+                slice(max(x - _FAINT_REACH_PX, 0), min(x + w + _FAINT_REACH_PX, cols))
+            joined = (self._joined(off[window], mask[window]) for off in (above, below))
+            out[window] = cv2.bitwise_or(out[window], cv2.bitwise_or(*joined))
         return out
 
     def _joined(self, off: np.ndarray, mask: np.ndarray) -> np.ndarray:
         """``mask`` (a window of the foreground) and the faint regions of ``off`` (how far each pixel is off
         the belt on one side of its level) that touch its pixels as far off on that side."""
         cfg = self.config
+        seeds = cv2.bitwise_and(mask, cv2.threshold(off, cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1])
+        if not cv2.countNonZero(seeds):
+            return mask  # no foreground on this side of the belt's level (bright parts: no dark one)
         _, faint = cv2.threshold(off, cfg.faint_threshold, 255, cv2.THRESH_BINARY)
         # Only faint regions 2 px wide or more: a sharp edge's blurred pixels stay out (joined, they move the
         # edge's window out, and its face is read off a pixel the edge still crosses). A narrower side lies
@@ -115,7 +118,6 @@ class Segmenter:
             wide = cv2.bitwise_and(cv2.dilate(wide, _CROSS), alone)
         # Each blob's faint regions filled from a pixel of its own (a connected-components labelling and a
         # lookup by label cost 6 ms a frame at 1280x720, this 0.5).
-        seeds = cv2.bitwise_and(mask, cv2.threshold(off, cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1])
         contours, _ = cv2.findContours(seeds, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
         candidates = cv2.bitwise_or(wide, mask)
         filled = np.zeros((mask.shape[0] + 2, mask.shape[1] + 2), dtype=np.uint8)
