@@ -88,10 +88,12 @@ class Segmenter:
                                 for off in (above, below)))
         if not 0 < cfg.faint_threshold < cfg.diff_threshold:
             return mask
-        # Only around each blob (a faint face reaches at most _FAINT_REACH_PX past its bounding box).
+        # Only around each blob (a faint face reaches at most _FAINT_REACH_PX past its bounding box), the
+        # largest segment.max_blobs (as many as are measured: the work per frame stays bounded).
         rows, cols = mask.shape
         out = mask.copy()
-        for contour in cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0]:
+        blobs = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0]
+        for contour in sorted(blobs, key=cv2.contourArea, reverse=True)[:cfg.max_blobs]:
             x, y, w, h = cv2.boundingRect(contour)
             window = slice(max(y - _FAINT_REACH_PX, 0), min(y + h + _FAINT_REACH_PX, rows)), \
                 slice(max(x - _FAINT_REACH_PX, 0), min(x + w + _FAINT_REACH_PX, cols))
