@@ -82,12 +82,11 @@ class Segmenter:
         region touching no foreground stays belt (a stain, the belt's own shading), and so does a bright
         part's faint shadow (darker than the belt)."""
         cfg = self.config
-        above = cv2.subtract(frame, belt)  # how much brighter than the belt (0 where darker)
-        below = cv2.subtract(belt, frame)
-        mask = cv2.bitwise_or(*(cv2.threshold(off, cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1]
-                                for off in (above, below)))
         if not 0 < cfg.faint_threshold < cfg.diff_threshold:
-            return mask
+            return cv2.threshold(cv2.absdiff(frame, belt), cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1]
+        sides = cv2.subtract(frame, belt), cv2.subtract(belt, frame)  # how much brighter, darker than the belt
+        strong = [cv2.threshold(off, cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1] for off in sides]
+        mask = cv2.bitwise_or(*strong)
         # Only around each blob (a faint face reaches at most _FAINT_REACH_PX past its bounding box), the
         # largest segment.max_blobs (as many as are measured: the work per frame stays bounded).
         rows, cols = mask.shape
@@ -97,18 +96,16 @@ class Segmenter:
             x, y, w, h = cv2.boundingRect(contour)
             window = slice(max(y - _FAINT_REACH_PX, 0), min(y + h + _FAINT_REACH_PX, rows)), \
                 slice(max(x - _FAINT_REACH_PX, 0), min(x + w + _FAINT_REACH_PX, cols))
-            joined = (self._joined(off[window], mask[window]) for off in (above, below))
-            out[window] = cv2.bitwise_or(out[window], cv2.bitwise_or(*joined))
+            for off, seeds in zip(sides, strong, strict=True):
+                if cv2.countNonZero(seeds[window]):  # else no foreground on that side (a bright part: no dark one)
+                    out[window] = cv2.bitwise_or(out[window], self._joined(off[window], seeds[window], mask[window]))
         return out
 
-    def _joined(self, off: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        """``mask`` (a window of the foreground) and the faint regions of ``off`` (how far each pixel is off
-        the belt on one side of its level) that touch its pixels as far off on that side."""
-        cfg = self.config
-        seeds = cv2.bitwise_and(mask, cv2.threshold(off, cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1])
-        if not cv2.countNonZero(seeds):
-            return mask  # no foreground on this side of the belt's level (bright parts: no dark one)
-        _, faint = cv2.threshold(off, cfg.faint_threshold, 255, cv2.THRESH_BINARY)
+    def _joined(self, off: np.ndarray, seeds: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """The window's foreground that ``seeds`` (its foreground on one side of the belt's level) lie in,
+        grown over the faint regions of ``off`` (how far each pixel is off the belt on that side) it touches;
+        ``mask``: the window's foreground on both sides."""
+        _, faint = cv2.threshold(off, self.config.faint_threshold, 255, cv2.THRESH_BINARY)
         # Only faint regions 2 px wide or more: a sharp edge's blurred pixels stay out (joined, they move the
         # edge's window out, and its face is read off a pixel the edge still crosses). A narrower side lies
         # within the window of the edge next to it.
@@ -126,7 +123,7 @@ class Segmenter:
         for contour in contours:
             x, y = contour[0, 0]
             cv2.floodFill(candidates, filled, (int(x), int(y)), 0, flags=8 | cv2.FLOODFILL_MASK_ONLY | (255 << 8))
-        return cv2.bitwise_or(filled[1:-1, 1:-1], mask)
+        return filled[1:-1, 1:-1]
 
     def _first(self, frame: np.ndarray) -> None:
         """The first frame is the reference, except where it is unlike the belt's level (its median over
