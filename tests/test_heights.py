@@ -270,6 +270,35 @@ def test_a_view_tells_its_own_height_whatever_it_is_lent():
         assert max(abs(h - 8.0) for h in heights) < 0.6, (lent_mm, heights)
 
 
+def test_a_vote_view_tells_its_own_shape_from_the_height_leading_or_the_best_fitting():
+    """A view that votes is fitted at every height tried and, like the views between votes, once more with
+    its height and size free from the box of the height leading the vote (a new part's first view: the
+    best fitting): the first views, near the edge of the view, tell a height best. The tests' 20 mm box
+    at 10 deg, three views from the edge inwards."""
+    scene = _box_scene(20.0, 10.0)
+    renderer, frames = rendered(scene)
+    pipeline = Pipeline(renderer.calibration, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
+    for i, (image, truth) in enumerate(frames[:25]):
+        if i not in (16, 20, 24):
+            pipeline.process(i, image, scene.t_ns(i))
+            continue
+        t = truth["objects"][0]
+        mask = pipeline.segmenter(image)
+        (new,) = pipeline.measurer(image, pipeline.segmenter.reference, mask)
+        best = min(new.trials, key=lambda trial: trial.rms_px)
+        led = KnownPart(t["x_mm"], t["y_mm"], None, leading_mm=20.0, vote_step_mm=40.0)
+        (voting,) = pipeline.measurer(image, pipeline.segmenter.reference, mask, [led])
+        for m, fitted_at in ((new, best.height_mm), (voting, 20.0)):
+            assert m.trials and m.shape_at_mm == fitted_at and m.shape_info is not None, (i, m.shape_at_mm)
+        # Fitted from the right height it reads it (a view fitted from another ends near where it started,
+        # and counts only if the vote decides on that height: see HeightEstimate._replay_between_votes).
+        length, width, height = np.linalg.solve(voting.shape_info, voting.shape_vec)
+        sigma_mm = np.sqrt(np.diag(np.linalg.inv(voting.shape_info)))
+        assert abs(height - 20.0) < min(3.0 * sigma_mm[2], 1.5), (i, height, sigma_mm)
+        assert abs(length - 80.0) < 0.5 and abs(width - 50.0) < 0.5, (i, length, width)
+        pipeline.process(i, image, scene.t_ns(i))
+
+
 def test_every_view_of_a_thin_box_reads_its_own_height_within_a_millimetre():
     """A view's own fit (its height and size free) has minima a millimetre or more apart, and ends in the
     one nearest where it starts. Started only from the plane's rectangle, three views of the tests' 8 mm

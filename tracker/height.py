@@ -32,15 +32,15 @@ size. The estimate has two stages.
    vote's start and the views that tell the height, less those that disagree beyond
    ``track.view_gate_chi2`` with what the start and the rest tell (a hand over the part, a fit gone
    astray; see _robust_sum): one the estimate let in while young is left out once the views after it
-   disagree with it. The views between the votes are fitted so too, from the leading height; those
-   fitted from the height that wins refine the estimate when the vote decides, as if they came then
-   (see _replay_between_votes). A view that disagrees with the
-   estimate counts as disagreeing; views that keep disagreeing for ``track.view_gate_frames`` views
-   start the vote again (meanwhile the height told is the one voted on again). The height has converged
-   once its uncertainty is below ``track.height_converged_sigma_mm`` over
-   ``track.height_converged_views`` views that agree with it (those that add nothing to it too: a part
-   passing under the camera shows no side for many views), and stays so until it exceeds
-   ``track.height_unconverged_sigma_mm`` (or the vote is held again);
+   disagree with it. The vote's views and those between them are fitted so too, from the leading
+   height (a new part's first view: from the best fitting); those fitted from the height that wins
+   refine the estimate when the vote decides, as if they came then (see _replay_between_votes). A
+   view that disagrees with the estimate counts as disagreeing; views that keep disagreeing for
+   ``track.view_gate_frames`` views start the vote again (meanwhile the height told is the one voted
+   on again). The height has converged once its uncertainty is below
+   ``track.height_converged_sigma_mm`` over ``track.height_converged_views`` views that agree with it
+   (those that add nothing to it too: a part passing under the camera shows no side for many views),
+   and stays so until it exceeds ``track.height_unconverged_sigma_mm`` (or the vote is held again);
    from then on every ``track.height_refine_every``-th view still tells its own.
 """
 
@@ -164,6 +164,11 @@ class HeightEstimate:
     def add(self, m: Measurement, x_mm: float, y_mm: float) -> None:
         """Add view ``m`` of the part, seen by the camera at (x, y) (world frame, mm)."""
         if m.trials and self.wants_vote(x_mm, y_mm):
+            if m.shape_info is not None and m.shape_at_mm:
+                # What the vote's view tells of its shape, fitted from the height then leading (a new
+                # part's: the best fitting), refines the estimate once the vote decides, as the views
+                # between votes do.
+                self._between_votes.append((m.shape_at_mm, m.shape_info, m.shape_vec))
             self._vote(m.trials, x_mm, y_mm)
         elif self.voting and m.shape_info is not None and self.leading_mm:
             # A view between votes tells its shape (fitted at the leading height): it refines the
