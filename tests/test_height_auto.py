@@ -265,6 +265,23 @@ def test_a_height_whose_boxes_need_a_side_brighter_than_the_top_loses_the_vote()
         assert not height.voting and height.shape()[0][2] == winner_mm, outside_mm
 
 
+def test_a_view_whose_flat_outline_reads_unlike_faces_counts_against_flat():
+    """A box seen along its long axis near the edge of the view has a rectangular silhouette (its top and
+    one side face), which a flat part of a larger size explains as well: its first view fitted flat
+    best (bench/heights_random.py --any-height scene 7, a 46.7 mm box at 10 deg: posed flat, 17 mm off,
+    until its second vote). The sides of that flat outline read unlike faces (the side face along one,
+    the top along the others): such a view counts against flat as much as a view can."""
+    cfg = TrackConfig()
+    sizes = {0.0: 103.0, 5.0: 100.0, 10.0: 97.0, 20.0: 93.0, 50.0: 78.0}
+    rms_px = {0.0: 0.04, 5.0: 0.08, 10.0: 0.08, 20.0: 0.08, 50.0: 0.045}
+    for uneven, lead_mm in ((False, 0.0), (True, 50.0)):
+        height = HeightEstimate(cfg)
+        view = _view(0.0, sizes, rms_px=rms_px)
+        trials = tuple(dataclasses.replace(t, faces_uneven=uneven and t.height_mm == 0) for t in view.trials)
+        height.add(dataclasses.replace(view, trials=trials), 0.0, 0.0)
+        assert height.leading_mm == lead_mm, uneven
+
+
 def test_a_first_view_near_the_edge_is_judged_on_every_window_of_its_edges():
     """A 20 mm box straight down, its first vote's view 5 px from the image's edge (one of
     bench/heights_random.py's scenes). Each height's box fit drops the windows it explains worst as

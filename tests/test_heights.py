@@ -299,6 +299,31 @@ def test_a_vote_view_tells_its_own_shape_from_the_height_leading_or_the_best_fit
         pipeline.process(i, image, scene.t_ns(i))
 
 
+@pytest.mark.parametrize("height_mm", [0.0, 20.0])
+def test_a_flat_outline_reads_unlike_faces_only_where_a_box_shows_a_side(height_mm):
+    """A vote's flat trial (height 0) is marked when the sides of the flat outline read faces unlike each
+    other (measure._uneven_faces: one side's face contrast under 0.8 of another's), as the silhouette
+    of a box showing a side face does: the tests' 20 mm box at 10 deg in most of its views (not where
+    the camera sees no side of it), a flat part in none."""
+    scene = _box_scene(height_mm, 10.0)
+    renderer, frames = rendered(scene)
+    pipeline = Pipeline(renderer.calibration, TrackerConfig(measure=MeasureConfig(estimate_height=True)))
+    marked = []
+    for i, (image, truth) in enumerate(frames):
+        t = truth["objects"][0]
+        if i % 8 == 0 and t is not None and t["border_px"] > 4:
+            mask = pipeline.segmenter(image)
+            (m,) = pipeline.measurer(image, pipeline.segmenter.reference, mask)
+            flat = next(trial for trial in m.trials if trial.height_mm == 0)
+            marked.append(flat.faces_uneven)
+        pipeline.process(i, image, scene.t_ns(i))
+    assert len(marked) >= 8, marked
+    if height_mm == 0:
+        assert not any(marked), marked
+    else:
+        assert np.mean(marked) >= 0.75 and marked[0], marked
+
+
 def test_every_view_of_a_thin_box_reads_its_own_height_within_a_millimetre():
     """A view's own fit (its height and size free) has minima a millimetre or more apart, and ends in the
     one nearest where it starts. Started only from the plane's rectangle, three views of the tests' 8 mm

@@ -217,7 +217,7 @@ def _outside_counts(height_mm: float, tilt_deg: float) -> tuple[int, dict[float,
         (m,) = pipeline.measurer(image, pipeline.segmenter.reference, mask, [KnownPart(t["x_mm"], t["y_mm"], None)])
         views += 1
         for trial in m.trials:
-            outside[trial.height_mm] = outside.get(trial.height_mm, 0) + trial.shades_outside
+            outside[trial.height_mm] = outside.get(trial.height_mm, 0) + trial.another_shape
     return views, outside
 
 
@@ -232,7 +232,8 @@ def test_a_box_of_the_wrong_height_explains_a_view_only_with_a_side_no_part_has(
     refinement converged at 21.6 mm. A step that leaps farther than the shades a side may have span is
     no reading of the shade, and flags nothing: converged after 24 % of its crossing, within 0.34 mm."""
     views, outside = _outside_counts(10.0, 0.0)
-    assert views >= 15 and outside[10.0] == 0 and outside[0.0] == 0, outside
+    # (Flat is marked in the views where the box shows a side: its outline reads unlike faces.)
+    assert views >= 15 and outside[10.0] == 0, outside
     assert outside[20.0] + outside[30.0] + outside[40.0] >= 1, outside
     frames = _auto(15, 10)
     converged = [i for i, (o, _) in enumerate(frames) if o["height_converged"]]

@@ -91,15 +91,20 @@ class HeightTrial:
     fitted: bool = True
     # What the view tells of this box's side shades (None: not told, a blurred image or no sides).
     shades: ViewShades | None = None
+    # Flat (height 0): the sides of its outline read faces unlike each other (a box's side face along
+    # one; see measure._uneven_faces).
+    faces_uneven: bool = False
 
     def __post_init__(self) -> None:
         if not (self.height_mm >= 0 and self.rms_px >= 0 and self.windows > 0 and min(self.size_var_mm2) >= 0):
             raise ValueError(f"height trial: expected height >= 0, rms >= 0 and windows > 0, got {self}")
 
     @property
-    def shades_outside(self) -> bool:
-        """Whether the box explains the view only with a side face of a shade no side has."""
-        return self.shades is not None and any(self.shades.outside)
+    def another_shape(self) -> bool:
+        """Whether this height explains the view only as another shape would: a box only with a side face
+        of a shade no side has (ViewShades.outside), flat only with an outline whose sides read unlike
+        faces (a box's side face along one)."""
+        return (self.shades is not None and any(self.shades.outside)) or self.faces_uneven
 
 
 class HeightEstimate:
@@ -122,7 +127,7 @@ class HeightEstimate:
         self._sizes: list[np.ndarray] = []
         self._size_vars: list[np.ndarray] = []
         self._fitted: list[np.ndarray] = []  # (K,) whether each height's box explained the view
-        self._outside: list[np.ndarray] = []  # (K,) whether it did only with a shade no side has
+        self._another: list[np.ndarray] = []  # (K,) whether it did only as another shape would
         self._last_vote_mm: np.ndarray | None = None  # where the part was at the last vote
         self._between_votes: list[tuple[float, np.ndarray, np.ndarray]] = []  # what views between votes told (see add)
         self._lead: tuple[float, np.ndarray] | None = None  # the leading height and its size (see _between)
@@ -276,7 +281,7 @@ class HeightEstimate:
         self._last_vote_mm = np.array([x_mm, y_mm])
         trials = tuple(by_height[h] for h in self.heights_mm)
         self._fitted.append(np.array([t.fitted for t in trials]))
-        self._outside.append(np.array([t.shades_outside for t in trials]))
+        self._another.append(np.array([t.another_shape for t in trials]))
         mse = np.array([t.rms_px**2 for t in trials])
         windows = min(t.windows for t in trials)
         # How much worse each height explains this view than its best, in windows: a view whose edges
@@ -320,9 +325,10 @@ class HeightEstimate:
     def _against(self) -> np.ndarray:
         """Whether each view counts against each height as much as a view can (views, K): no box of that
         height explains the view and tells its size, or one does only with a side face as bright as its
-        top (or as dark as the belt), however well it fits the edges: that is the shape of another part
-        (a taller box's bright sides pass for a flat part's top)."""
-        return ~self._told() | np.array(self._outside)
+        top (or as dark as the belt), or flat only with an outline whose sides read unlike faces, however
+        well it fits the edges: that is the shape of another part (a taller box's bright sides pass for a
+        flat part's top; a box seen along its axis near the edge of the view, for a larger flat part)."""
+        return ~self._told() | np.array(self._another)
 
     def _scored(self, sizes: np.ndarray, weights: np.ndarray, excess: np.ndarray, against: np.ndarray) -> np.ndarray:
         """The score of each height (or height between them) from its views' sizes and their weights

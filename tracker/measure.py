@@ -31,7 +31,7 @@ from tracker.boxfit import (
 )
 from tracker.calibration import apply_homography
 from tracker.config import MeasureConfig
-from tracker.geometry import Rect, min_area_rect, refine_rect
+from tracker.geometry import Rect, min_area_rect, rectangle_corners, refine_rect
 from tracker.height import HeightTrial, vote_due
 from tracker.split import SplitRule, split_blob
 from tracker.undistort import BeltMapper
@@ -47,6 +47,10 @@ _ERODE = cv2.getStructuringElement(cv2.MORPH_RECT, (5, 5))
 _ZONE = cv2.getStructuringElement(cv2.MORPH_RECT, (7, 7))
 # Fewer sub-pixel edge points than this: the blob is measured from its pixel staircase.
 _MIN_EDGE_POINTS = 12
+# A flat outline whose sides read faces this unlike (the dimmest side's contrast over the brightest's),
+# each side over at least this many windows, is a box's (see _uneven_faces).
+_UNEVEN_RATIO = 0.8
+_UNEVEN_MIN_WINDOWS = 5
 
 
 @dataclass(frozen=True)
@@ -203,6 +207,9 @@ class Measurer:
             elif edges is not None:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
                 box, trials = self._fit_box(points_norm, self._windows(edges), rect, known)
+                if trials and flat_rect is not None and self._blur_px == 0 and cfg.vote_on_shades:
+                    uneven = _uneven_faces(edges, self.mapper.to_mm(edges.points_px), flat_rect)
+                    trials = tuple(replace(t, faces_uneven=uneven) if t.height_mm == 0 else t for t in trials)
                 if box is not None:
                     rect = box.rect
                 elif flat_rect is not None:
@@ -526,6 +533,26 @@ def _edge_points_of(rows: _Crossings, cols: _Crossings, levels: tuple) -> np.nda
     return np.concatenate([rows.points(levels[0]), cols.points(levels[1])[:, ::-1]])
 
 
+def _uneven_faces(edges: _Edges, points_mm: np.ndarray, rect: Rect) -> bool:
+    """Whether the sides of a blob's flat outline ``rect`` read faces unlike each other: the face next to
+    its edges (see _Crossings.face_levels) differs from the belt under it by less than
+    _UNEVEN_RATIO of the most along one side than along another (each side's median), as where a
+    box's side face makes one side of its silhouette. A flat part's top is one face. ``points_mm``:
+    the edge points (``edges.points_px``) on the belt."""
+    k = HALF_WINDOW_PX
+    contrast = np.abs(np.concatenate([edges.rows.face_contrast(k), edges.cols.face_contrast(k)]))
+    corners = rectangle_corners(rect.x_mm, rect.y_mm, rect.angle_deg, rect.length_mm, rect.width_mm)
+    # Each point's distance to each side's line (the sides' lines: corner i to i+1).
+    a, b = corners, np.roll(corners, -1, axis=0)
+    along = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
+    rel = points_mm[:, None, :] - a[None]
+    dist = np.abs(rel[..., 0] * along[None, :, 1] - rel[..., 1] * along[None, :, 0])
+    side = np.argmin(dist, axis=1)
+    medians = [float(np.median(contrast[side == s])) for s in range(4)
+               if np.count_nonzero(side == s) >= _UNEVEN_MIN_WINDOWS]
+    return len(medians) >= 2 and min(medians) < _UNEVEN_RATIO * max(medians)
+
+
 def _size_variances(fit: BoxFit) -> tuple[float, float]:
     """How well a box fit's view alone decides its length and width (variances, mm^2; inf: not at all)."""
     if fit.size_cov_mm2 is None:
@@ -585,6 +612,12 @@ class _Crossings:
         """Pixels of each window the part covers, in units of ``level``'s contrast (Pixel = (1 - c) *
         belt + c * part); along a row the covered fractions add up to where the edge crosses it."""
         return ((self.image - self.belt) / (np.reshape(level, (-1, 1)) - self.belt)).sum(axis=1)
+
+    def face_contrast(self, half_window: int) -> np.ndarray:
+        """Each window's face next to the edge (see face_levels) less the belt under that pixel."""
+        at = np.where(self.rising, half_window + 1, half_window - 2)
+        rows = np.arange(len(at))
+        return self.image[rows, at] - self.belt[rows, at]
 
     def face_levels(self, half_window: int) -> np.ndarray:
         """Each window's face next to the edge: the first pixel wholly inside, one past the boundary pixel."""
