@@ -113,6 +113,10 @@ class Measurer:
         self.config = config
         # The blur edges are seen through: the camera's own, and the pipeline's on top.
         self._blur_px = math.hypot(config.edge_blur_px, smoothing_px)
+        # Side shades are told (learnt, voted on) in a sharp image only: a blur spreads a sliver's shade
+        # into its neighbours, and views misread it.
+        self._sharp = self._blur_px == 0
+        self._tell_shades = config.learn_shades and self._sharp
         self._width, self._height = mapper.calibration.size
         # Conservative pixel-area pre-filter, so tiny specks are never mapped at all.
         self._min_area_px = 0.5 * config.min_area_mm2 / mapper.max_mm_per_px() ** 2
@@ -207,7 +211,7 @@ class Measurer:
             elif edges is not None:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
                 box, trials = self._fit_box(points_norm, self._windows(edges), rect, known)
-                if trials and flat_rect is not None and self._blur_px == 0 and cfg.vote_on_shades:
+                if trials and flat_rect is not None and self._sharp and cfg.vote_on_shades:
                     uneven = _uneven_faces(edges, self.mapper.to_mm(edges.points_px), flat_rect)
                     trials = tuple(replace(t, faces_uneven=uneven) if t.height_mm == 0 else t for t in trials)
                 if box is not None:
@@ -305,7 +309,7 @@ class Measurer:
             # back to the track (from a sharp image only, as below).
             return fit(cfg.part_height_mm, size_prior=self._size_of(known),
                        shade_prior=None if known is None else known.shades,
-                       tell_shades=cfg.learn_shades and self._blur_px == 0 and cfg.part_height_mm > 0), ()
+                       tell_shades=self._tell_shades and cfg.part_height_mm > 0), ()
         if known is not None and known.height_mm is not None:
             # Its height voted on, being refined. Its pose: a box of that height, its size and side shades
             # lent (with the height free too, a thin part's fit wanders along the valley where height
@@ -313,7 +317,7 @@ class Measurer:
             # image only (a blur spreads a sliver's shade into its neighbours, and views misread it:
             # 0.2-0.5 against a rendered 0.5-0.7, with the camera's or the textured model's blur).
             pose = fit(known.height_mm, size_prior=self._size_of(known), shade_prior=known.shades,
-                       tell_shades=cfg.learn_shades and self._blur_px == 0)
+                       tell_shades=self._tell_shades)
             return self._own_shape(pose, fit, known.refine, known.height_mm), ()
         # Voted on, or new: at each height of height_starts_mm when the view votes, its pose at the
         # height leading the vote (a new part's: the height that fits it best).
@@ -323,7 +327,7 @@ class Measurer:
             # and what the view tells of the shape, kept until the vote decides (tracker/height.py).
             if lead in (None, 0.0):
                 return None, ()
-            pose = fit(lead, shade_prior=known.shades, tell_shades=cfg.learn_shades and self._blur_px == 0)
+            pose = fit(lead, shade_prior=known.shades, tell_shades=self._tell_shades)
             return self._own_shape(pose, fit, known.refine, lead), ()
         self._votes_left -= 1
         boxes, trials = self._trials(fit, rect, windows, cfg.height_starts_mm)
@@ -334,7 +338,7 @@ class Measurer:
         box = next((b for b in boxes if b.height_mm == lead), None)
         if box is None and lead is not None and lead not in cfg.height_starts_mm:
             # The leading height lies between those tried: its own box (whose shades the track may learn).
-            box = fit(lead, tell_shades=cfg.learn_shades and self._blur_px == 0)
+            box = fit(lead, tell_shades=self._tell_shades)
         # A vote's view tells its own shape too, as a view between votes does (kept until the vote
         # decides): the first views, near the edge of the view, tell a height best (random scenes' 20 mm
         # boxes at 10 deg: those between the votes told it to 0.35 mm, converging only after 39 % of the
@@ -367,7 +371,7 @@ class Measurer:
         # textured belt model smooths): there the fits from the pose held the track near a wrong height
         # (the tests' 20 mm box on a knurled belt converged on 15.8-16.5 mm; 19.5-19.7 from the plane's
         # rectangle alone).
-        near = [fit(pose.height_mm, start=pose.rect, near=True, **_OWN)] if self._blur_px == 0 else []
+        near = [fit(pose.height_mm, start=pose.rect, near=True, **_OWN)] if self._sharp else []
         views = [f for f in (*near, fit(height_mm, **_OWN)) if f is not None]
         if not views:
             return pose
@@ -379,19 +383,18 @@ class Measurer:
         """A box of each height, its size free: those that fit, and the trials."""
         cfg = self.config
         # Their shades: for the vote's check, and for the track to learn from the view that decides it.
-        tell = self._blur_px == 0 and (cfg.vote_on_shades or cfg.learn_shades)
+        tell = self._sharp and (cfg.vote_on_shades or cfg.learn_shades)
         # Each height's fit judged over the windows some height's kept (see comparable_ms_px2), in a sharp
         # image: in a blurred one (the textured belt model smooths) a flat part's fit drops more of the
         # windows its knurl disturbs than a box's, whose side shades take some of it up (the tests' flat
         # parts on a knurled belt led at 2.5-10 mm for most of their crossing: 0.64 mm off, 0.37 with
         # each fit's own RMS).
-        sharp = self._blur_px == 0
-        fits = [(h, fit(h, tell_shades=tell and h > 0, keep_residuals=sharp, keep_model_errors=True))
+        fits = [(h, fit(h, tell_shades=tell and h > 0, keep_residuals=self._sharp, keep_model_errors=True))
                 for h in heights_mm]
         boxes = [f for _, f in fits if f is not None]
         if not boxes:
             return [], ()
-        ms = iter(comparable_ms_px2(boxes, cfg.sum_sigma_px) if sharp else [f.rms_px**2 for f in boxes])
+        ms = iter(comparable_ms_px2(boxes, cfg.sum_sigma_px) if self._sharp else [f.rms_px**2 for f in boxes])
         # A height no box of explains (worse than box_max_rms_px) votes as if it had just that.
         trials = tuple(HeightTrial(h, rect, cfg.box_max_rms_px, len(windows), fitted=False) if f is None else
                        HeightTrial(h, f.rect, math.sqrt(next(ms)), f.windows, _size_variances(f),
