@@ -28,6 +28,7 @@ from tracker.boxfit import (
     ViewShades,
     comparable_ms_px2,
     fit_box,
+    widened,
 )
 from tracker.calibration import apply_homography
 from tracker.config import MeasureConfig
@@ -47,6 +48,9 @@ _ERODE = cv2.getStructuringElement(cv2.MORPH_RECT, (5, 5))
 _ZONE = cv2.getStructuringElement(cv2.MORPH_RECT, (7, 7))
 # Fewer sub-pixel edge points than this: the blob is measured from its pixel staircase.
 _MIN_EDGE_POINTS = 12
+# A view's own fits (from its pose and from the plane's rectangle, Measurer._own_shape) whose mean squares
+# lie within this fraction of each other explain it alike (see told_alike).
+_ALIKE_MS = 0.1
 # A flat outline whose sides read faces this unlike (the dimmest side's contrast over the brightest's),
 # each side over at least this many windows, is a box's (see _uneven_faces).
 _UNEVEN_RATIO = 0.8
@@ -357,10 +361,11 @@ class Measurer:
     def _own_shape(self, pose: BoxFit | None, fit, refine: bool, height_mm: float) -> BoxFit | None:
         """``pose`` (a box of ``height_mm``) with what its view tells of the part's shape on its own (when
         the track wants it, ``refine``): fitted again with the height and size free, nothing lent,
-        from the pose (in a sharp image) and from the plane's rectangle at that height, the better kept.
-        Lent the track's size, a view reads the height it is lent (the size a height needs holds the
-        height where they trade: a 15 mm box's views lent 13.6 mm read 13.5, lent 16.5 read 16.0); lent
-        the side shades learnt at a wrong height, likewise."""
+        from the pose (in a sharp image) and from the plane's rectangle at that height, the better kept
+        (where both explain it alike, no surer than they lie apart: see told_alike). Lent the track's
+        size, a view reads the height it is lent (the size a height needs holds the height where they
+        trade: a 15 mm box's views lent 13.6 mm read 13.5, lent 16.5 read 16.0); lent the side shades
+        learnt at a wrong height, likewise."""
         if pose is None or not refine:
             return pose
         # Its sums have minima a millimetre or more apart (a thin side face's shade trades with its width),
@@ -375,8 +380,15 @@ class Measurer:
         views = [f for f in (*near, fit(height_mm, **_OWN)) if f is not None]
         if not views:
             return pose
-        view = views[int(np.argmin(comparable_ms_px2(views, self.config.sum_sigma_px)))]
-        return replace(pose, shape_info=view.shape_info, shape_vec=view.shape_vec)
+        ms = comparable_ms_px2(views, self.config.sum_sigma_px)
+        best = int(np.argmin(ms))
+        info, vec = views[best].shape_info, views[best].shape_vec
+        if len(views) == 2 and max(ms) <= ms[best] * (1.0 + _ALIKE_MS) and info is not None:
+            # Both explain the view about as well: two minima, and the view tells its shape no surer than
+            # they lie apart (random scene 10 at 25 deg: a view whose fits ended at 21.6 and 18.4 mm,
+            # their mean squares 6 % apart, claimed 18.4 +- 0.05 mm and held the estimate 0.64 mm off).
+            info, vec = told_alike(views[best], views[1 - best])
+        return replace(pose, shape_info=info, shape_vec=vec)
 
     def _trials(self, fit, rect: Rect, windows: EdgeWindows,
                 heights_mm: tuple[float, ...]) -> tuple[list[BoxFit], tuple[HeightTrial, ...]]:
@@ -534,6 +546,17 @@ def _edge_points_of(rows: _Crossings, cols: _Crossings, levels: tuple) -> np.nda
     """The edge points (Nx2: x, y in the examined window) of the row and column crossings, each read
     against its level (per window, or one)."""
     return np.concatenate([rows.points(levels[0]), cols.points(levels[1])[:, ::-1]])
+
+
+def told_alike(best: BoxFit, other: BoxFit) -> tuple[np.ndarray, np.ndarray]:
+    """What a view tells of its shape (``best``'s information and vector on (length, width, height)) when
+    another fit of it, ``other``, ends in another minimum that explains it about as well: no surer than
+    they lie apart, along the line between them (half their distance as one sigma; the estimate stays
+    ``best``'s). A side face's shade trades with its width, and a sliver's sums have minima millimetres
+    apart: each fit's own curvature claims its minimum alone."""
+    apart = np.array([best.rect.length_mm - other.rect.length_mm, best.rect.width_mm - other.rect.width_mm,
+                      best.height_mm - other.height_mm])
+    return widened(best.shape_info, best.shape_vec, np.outer(apart, apart) / 4.0)
 
 
 def _uneven_faces(edges: _Edges, points_mm: np.ndarray, rect: Rect) -> bool:
