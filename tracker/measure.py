@@ -344,9 +344,9 @@ class Measurer:
             # The leading height lies between those tried: its own box (whose shades the track may learn).
             box = fit(lead, tell_shades=self._tell_shades)
         # A vote's view tells its own shape too, as a view between votes does (kept until the vote
-        # decides): the first views, near the edge of the view, tell a height best (random scenes' 20 mm
-        # boxes at 10 deg: those between the votes told it to 0.35 mm, converging only after 39 % of the
-        # crossing; with the vote's views, 0.3 mm at the third vote).
+        # decides): the first views, near the edge of the view, tell a height best (bench/heights_random.py
+        # scene 10, 20 mm at 10 deg: those between the votes told it to 0.35 mm, converging only after 39 %
+        # of the crossing; with the vote's views too, under 0.3 mm when the vote decides, after 12 %).
         if box is None:
             # No box of the leading height: the best one's pose, whose shades are another height's. A new
             # part (no height leads yet) tells its shape as that box, if it has sides.
