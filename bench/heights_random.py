@@ -1,9 +1,10 @@
 """Parts with height on random scenes: how often the issue's bounds hold where nothing was tuned.
 
-    .venv/bin/python bench/heights_random.py [--scenes N] [--first K] [--any-height] [--json]
+    .venv/bin/python bench/heights_random.py [--scenes N] [--first K] [--any-height] [--tilt DEG] [--json]
 
 Each scene is drawn from its own seed: a camera (480x360 to 640x480, focal length 0.8-1.1 times the
-width, 600-900 mm above the belt, tilted 0, 10 or 20 deg in turn, turned -40 to 40 deg), one box
+width, 600-900 mm above the belt, tilted 0, 10 or 20 deg in turn, or with --tilt every one that much,
+turned -40 to 40 deg), one box
 (60-100 x 35-65 mm, its height 0, 5, 10, 20 or 60 mm in turn, or with --any-height drawn from 3-60
 mm, 150-220 grey on a 50-80 grey belt)
 crossing the whole view at 250-400 mm/s while turning, in view at the start or entering it. The
@@ -36,14 +37,16 @@ HEIGHTS_MM = (0.0, 5.0, 10.0, 20.0, 60.0)
 TILTS_DEG = (0.0, 10.0, 20.0)
 
 
-def scene(k: int, any_height: bool = False) -> SceneSpec:
+def scene(k: int, any_height: bool = False, tilt_deg: float | None = None) -> SceneSpec:
     """The k-th random scene (its tilt cycles fastest, then its height; with ``any_height`` its height is
-    drawn from 3-60 mm, evenly on a log scale, from a seed of its own)."""
+    drawn from 3-60 mm, evenly on a log scale, from a seed of its own; ``tilt_deg``: every camera's tilt,
+    the rest of the scene as it is)."""
     rng = np.random.default_rng(1000 + k)
     width, height = [(480, 360), (560, 420), (640, 480)][rng.integers(3)]
     focal = float(rng.uniform(0.8, 1.1) * width)
     above = float(rng.uniform(600, 900))
-    cam = CameraSpec(width=width, height=height, focal_px=focal, tilt_deg=TILTS_DEG[k % 3],
+    cam = CameraSpec(width=width, height=height, focal_px=focal,
+                     tilt_deg=TILTS_DEG[k % 3] if tilt_deg is None else tilt_deg,
                      yaw_deg=float(rng.uniform(-40, 40)), height_mm=above,
                      principal_offset_px=(float(rng.uniform(-5, 5)), float(rng.uniform(-5, 5))))
     half_view = 0.5 * width * above / focal
@@ -67,8 +70,8 @@ def poses_of(spec: SceneSpec, frames: list, measure: MeasureConfig) -> list[dict
     return [pipeline.process(i, image, spec.t_ns(i)).to_dict() for i, (image, _) in enumerate(frames)]
 
 
-def measure_scene(k: int, any_height: bool = False) -> dict:
-    spec = scene(k, any_height)
+def measure_scene(k: int, any_height: bool = False, tilt_deg: float | None = None) -> dict:
+    spec = scene(k, any_height, tilt_deg)
     renderer = Renderer(spec)
     frames = [renderer.render(i) for i in range(spec.n_frames)]
     truths = [t for _, t in frames]
@@ -125,10 +128,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--first", type=int, default=0, help="the first scene's number")
     parser.add_argument("--any-height", action="store_true",
                         help="each scene's height drawn from 3-60 mm (evenly on a log scale), not 0/5/10/20/60")
+    parser.add_argument("--tilt", type=float, help="every camera tilted this much (deg; the issue allows up to 25)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     with Pool(2) as pool:
-        rows = pool.map(partial(measure_scene, any_height=args.any_height), range(args.first, args.first + args.scenes))
+        rows = pool.map(partial(measure_scene, any_height=args.any_height, tilt_deg=args.tilt),
+                        range(args.first, args.first + args.scenes))
     if args.json:
         print(json.dumps(rows, indent=1))
         return 0
