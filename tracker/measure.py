@@ -202,7 +202,8 @@ class Measurer:
                 points_px = edges.points_px
                 # Undistorted once: the rectangle on the belt and a box's fit both start from them.
                 points_norm = self.mapper.to_norm(points_px)
-                rect = view = self._rect_of(self.mapper.norm_to_mm(points_norm))
+                points_mm = self.mapper.norm_to_mm(points_norm)
+                rect = view = self._rect_of(points_mm)
             elif flat_rect is not None:
                 rect = view = flat_rect  # no box reads from these edges: measured as flat parts are
             known = self._known_part(rect)
@@ -216,7 +217,7 @@ class Measurer:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
                 box, trials = self._fit_box(points_norm, self._windows(edges), rect, known)
                 if trials and flat_rect is not None and self._sharp and cfg.vote_on_shades:
-                    uneven = _uneven_faces(edges, self.mapper.to_mm(edges.points_px), flat_rect)
+                    uneven = _uneven_faces(edges, points_mm, flat_rect)
                     trials = tuple(replace(t, faces_uneven=uneven) if t.height_mm == 0 else t for t in trials)
                 if box is not None:
                     rect = box.rect
@@ -641,13 +642,15 @@ class _Crossings:
 
     def face_contrast(self, half_window: int) -> np.ndarray:
         """Each window's face next to the edge (see face_levels) less the belt under that pixel."""
-        at = np.where(self.rising, half_window + 1, half_window - 2)
-        rows = np.arange(len(at))
-        return self.image[rows, at] - self.belt[rows, at]
+        return self.face_levels(half_window) - self._at_face(self.belt, half_window)
 
     def face_levels(self, half_window: int) -> np.ndarray:
         """Each window's face next to the edge: the first pixel wholly inside, one past the boundary pixel."""
-        return np.where(self.rising, self.image[:, half_window + 1], self.image[:, half_window - 2])
+        return self._at_face(self.image, half_window)
+
+    def _at_face(self, values: np.ndarray, half_window: int) -> np.ndarray:
+        """Of ``values`` (N, 2k), each window's at its face pixel (see face_levels)."""
+        return np.where(self.rising, values[:, half_window + 1], values[:, half_window - 2])
 
     def ends_px(self) -> tuple[np.ndarray, np.ndarray]:
         """Each window's inner end (Nx2: col, row, pixel coordinates of this orientation) and its
