@@ -149,3 +149,40 @@ def test_overruns_reach_the_health_word_and_status_line(monkeypatch):
     assert summary.overruns > 20 and health.overruns == summary.overruns
     assert health.fault == FAULT_OVERRUN
     assert any("overruns" in line for line in status.lines)
+
+
+def test_the_overrun_fault_clears_once_the_loop_keeps_up_again(monkeypatch):
+    """Fault 4 says frames are being dropped now: a loop that fell behind for a few frames and keeps up
+    again clears it after the hold (a PLC would otherwise see the cell faulty for good after a single
+    dropped frame); the overruns stay counted."""
+    from tracker.health import FAULT_NONE, FAULT_OVERRUN, Health
+    from tracker.pipeline import Pipeline
+    from tracker.runner import Runner
+    from tracker.synthetic import CameraSpec
+
+    _fake(monkeypatch, frames=2000, period_s=0.01)
+    health = Health()
+    faults = []
+
+    class SlowThenFastSink:
+        def submit(self, frame, result):
+            faults.append(health.fault)
+            if len(faults) <= 5:
+                time.sleep(0.035)  # behind a 100 fps camera for five frames
+
+        def status(self):
+            return ""
+
+        def close(self):
+            pass
+
+    calib = CameraSpec(width=64, height=48, focal_px=56.0).calibration()
+    runner = Runner(CameraSource(0), Pipeline(calib), [SlowThenFastSink()], health, max_frames=60,
+                    overrun_hold_s=0.1)
+    summary = runner.run()
+    assert summary.overruns > 0 and health.overruns == summary.overruns
+    set_at = faults.index(FAULT_OVERRUN)
+    assert set_at <= 6, faults
+    # Cleared once no frame has been dropped for the hold (a busy machine may drop one more later:
+    # it is set again, and clears again).
+    assert FAULT_NONE in faults[set_at:], faults

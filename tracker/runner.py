@@ -24,6 +24,10 @@ from tracker.sources import Frame, FrameSource
 log = logging.getLogger(__name__)
 
 STATUS_PERIOD_S = 0.25
+# Fault 4 (overrun) says frames are being dropped now: set at each one, cleared once none has been
+# dropped for this long (a PLC polling every second still sees a single dropped frame). Latched, one
+# frame dropped in a run (a 90 fps camera's one in a hundred) would flag the cell faulty for good.
+OVERRUN_FAULT_HOLD_S = 2.0
 # Loop times kept for percentiles (a ring: memory stays flat over any run length).
 _LOOP_WINDOW = 4096
 
@@ -139,7 +143,8 @@ def describe(result: FrameResult) -> str:
 class Runner:
     def __init__(self, source: FrameSource, pipeline: Pipeline, sinks: list[Sink],
                  health: Health | None = None, status: StatusLine | None = None,
-                 stop: threading.Event | None = None, max_frames: int | None = None) -> None:
+                 stop: threading.Event | None = None, max_frames: int | None = None,
+                 overrun_hold_s: float = OVERRUN_FAULT_HOLD_S) -> None:
         self.source = source
         self.pipeline = pipeline
         self.sinks = sinks
@@ -148,6 +153,21 @@ class Runner:
         self.stop = stop or threading.Event()
         self.max_frames = max_frames
         self.summary = RunSummary()
+        self._overrun_hold_ns = round(overrun_hold_s * 1e9)
+        self._overruns_seen = 0
+        self._last_overrun_ns: int | None = None
+
+    def _check_overruns(self, health: Health, now_ns: int) -> None:
+        """The source's overruns into the health word: fault 4 while frames are being dropped (see
+        OVERRUN_FAULT_HOLD_S); the count stays for the status line and the summary."""
+        health.overruns = self.source.overruns
+        if health.overruns > self._overruns_seen:
+            self._overruns_seen = health.overruns
+            self._last_overrun_ns = now_ns
+            health.set_fault(FAULT_OVERRUN)
+        elif self._last_overrun_ns is not None and now_ns - self._last_overrun_ns >= self._overrun_hold_ns:
+            self._last_overrun_ns = None
+            health.clear_fault(FAULT_OVERRUN)
 
     def run(self) -> RunSummary:
         calib = self.pipeline.calibration
@@ -164,9 +184,7 @@ class Runner:
                 t0 = time.perf_counter_ns()
                 result = self.pipeline.process(frame.index, frame.image, frame.t_ns)
                 health.part_tracked = bool(result.objects)
-                health.overruns = self.source.overruns
-                if self.source.overruns:
-                    health.set_fault(FAULT_OVERRUN)
+                self._check_overruns(health, t0)
                 if result.scene_fault:
                     health.set_fault(FAULT_SCENE)
                     if not summary.scene_faults:
