@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from tracker.calibration import Calibration
+from tracker.shadebounds import BRIGHT, ShadeBounds
 
 # Face kinds: the top, the sides facing the part's own x (its ends) and those facing its y.
 TOP, SIDE_X, SIDE_Y = 0, 1, 2
@@ -39,6 +40,8 @@ class EdgeWindows:
     units of the contrast of the pixel that spans ``level_px`` (from, to: px from the inner end).
     ``blur_px``: the image's blur (a Gaussian's sigma, px) that spreads each face's level into the
     pixels next to it: the level pixel of a window across a thin side face is a blurred mix.
+    ``shade_bounds``: the shades the part's side faces may have (a part darker than the belt has
+    others than a brighter one: tracker/shadebounds.py).
     """
 
     inner_norm: np.ndarray  # (N, 2)
@@ -47,6 +50,7 @@ class EdgeWindows:
     span_px: float
     level_px: tuple[float, float]
     blur_px: float = 0.0
+    shade_bounds: ShadeBounds = BRIGHT
 
     def __post_init__(self) -> None:
         n = len(self.covered_px)
@@ -58,8 +62,8 @@ class EdgeWindows:
         return len(self.covered_px)
 
     def subset(self, which: np.ndarray) -> EdgeWindows:
-        return EdgeWindows(self.inner_norm[which], self.step_norm[which], self.covered_px[which], self.span_px,
-                           self.level_px, self.blur_px)
+        return replace(self, inner_norm=self.inner_norm[which], step_norm=self.step_norm[which],
+                       covered_px=self.covered_px[which])
 
 
 class BoxCamera:

@@ -19,6 +19,7 @@ import numpy as np
 
 from tracker.box import SIDE_X, SIDE_Y, BoxCamera, EdgeWindows, distances_to_outline, lengths_in_faces
 from tracker.geometry import Rect, wrap_angle_deg
+from tracker.shadebounds import BRIGHT, ShadeBounds
 
 # Parameters: x, y (mm), angle (deg), length, width, height (mm).
 _H = 5
@@ -37,19 +38,14 @@ CONVERGED_STEPS = 1.0
 # find across views, and a fit with the height free travels long, nearly flat valleys in small steps
 # (with 1.0 the tests' 10 mm box is estimated 0.6 mm off instead of 0.3).
 PRECISE_STEPS = 0.05
-# The side shades' prior, and how weakly it holds them (px of residual per unit of shade): a side
-# face too narrow to show its shade leaves the shade undecided.
-_SHADE_START, _SHADE_PRIOR = 0.5, 0.02
-_DEFAULT_START, _DEFAULT_HOLD = np.full(2, _SHADE_START), np.full(2, _SHADE_PRIOR**2)
-# The shades a side may have: from nearly the belt's level (a window read against a side face as
-# dark as the belt has no contrast to read; the measurement refuses those) to half again the top's
-# contrast. A fit that would need others is wandering in a flat valley.
-_SHADE_RANGE = (0.1, 1.5)
-# A view tells a side's shade below this only: a step that leaves the shades a side may have tells
-# none, nor does one as bright as the top (such a side looks like more of the top, and lent, it lets
-# a box of another height pass for the part: when the vote's boxes learnt shades too, a flat part's
-# 5-10 mm boxes learnt 1.0-1.2 and led its vote).
-_SHADE_TOLD_MAX = 1.0
+# How weakly the side shades' prior holds them (px of residual per unit of shade): a side face too
+# narrow to show its shade leaves the shade undecided. Where the shades start, where a fit keeps them
+# and which a view tells: the windows' ShadeBounds (tracker/shadebounds.py). A view tells none as
+# bright as the top: such a side looks like more of the top, and lent, it lets a box of another height
+# pass for the part (when the vote's boxes learnt shades too, a flat part's 5-10 mm boxes learnt
+# 1.0-1.2 and led its vote).
+_SHADE_PRIOR = 0.02
+_DEFAULT_HOLD = np.full(2, _SHADE_PRIOR**2)
 # How many of its sigmas a view's shade has to lie outside the shades a side may have for the view to
 # tell a side no part has (ViewShades.outside): a vote's height is counted against on it, so one
 # view's noise should rarely do it (2 sigma: about 2 % of views at a side's limit; the tests' boxes' own
@@ -138,12 +134,13 @@ class ViewShades:
 
     shades: tuple[float, float]
     variances: tuple[float, float]
-    # Whether the view tells, beyond _OUTSIDE_SIGMAS of its uncertainty, a shade no side has (at least
-    # the top's, or below _SHADE_RANGE): a box of this height explains the view only as some other shape
-    # would (a taller box's sides as bright as its top pass for a flat part's larger top; its sides as
-    # dark as the belt, for a flat part's top). A face whose shade the view does not tell (its step
-    # leaps, unsure by 0.2-0.9) tells none: flagged, the part's own height was counted against (15, 20
-    # and 60 mm boxes near the view's edge).
+    # Whether the view tells, beyond _OUTSIDE_SIGMAS of its uncertainty, a shade no side has (beyond
+    # ShadeBounds.possible: on a part brighter than the belt as bright as the top, or as dark as the
+    # belt): a box of this height explains the view only as some other shape would (a taller box's
+    # sides as bright as its top pass for a flat part's larger top; its sides as dark as the belt, for
+    # a flat part's top). A face whose shade the view does not tell (its step leaps, unsure by 0.2-0.9)
+    # tells none: flagged, the part's own height was counted against (15, 20 and 60 mm boxes near the
+    # view's edge).
     outside: tuple[bool, bool] = (False, False)
     # What the view tells of (length, width, end shade, long shade) together, its pose marginalised out:
     # information (4x4; 1/mm^2, 1/mm per unit shade, per unit shade^2) and information vector (4); None
@@ -154,27 +151,33 @@ class ViewShades:
 
 
 def predicted_sums(camera: BoxCamera, windows: EdgeWindows, params: np.ndarray, shades: np.ndarray | None = None,
-                   shade_start: np.ndarray = _DEFAULT_START, shade_hold: np.ndarray = _DEFAULT_HOLD) -> np.ndarray:
+                   shade_start: np.ndarray | None = None, shade_hold: np.ndarray = _DEFAULT_HOLD) -> np.ndarray:
     """The coverage sums each box (P rows of ``params``) predicts for ``windows`` (P, N; px) with the
     side ``shades`` (end faces, long faces), or with the shades that explain the sums best (None; from
-    ``shade_start``, held there by ``shade_hold``, each (2,): see _best_shades)."""
+    ``shade_start``, the windows' ShadeBounds.start by default, held there by ``shade_hold``, each (2,):
+    see _best_shades)."""
     polygons, kinds = camera.faces(params)
-    return _shaded(lengths_in_faces(windows, polygons), kinds, windows.covered_px, shades, shade_start, shade_hold)[0]
+    bounds = windows.shade_bounds
+    start = np.full(2, bounds.start) if shade_start is None else shade_start
+    return _shaded(lengths_in_faces(windows, polygons), kinds, windows.covered_px, shades, start, shade_hold,
+                   bounds)[0]
 
 
-def _best_shades(total: np.ndarray, level: np.ndarray, covered: np.ndarray) -> np.ndarray:
+def _best_shades(total: np.ndarray, level: np.ndarray, covered: np.ndarray,
+                 bounds: ShadeBounds = BRIGHT) -> np.ndarray:
     """The side shades that best explain the sums (P, 2), given each kind's pixels in each window
     (P, N, 3) and in its level pixel: covered * (level . s) = total . s is linear in the shades s,
     and reweighted by the level it implies it is the residual itself (_SHADE_ROUNDS rounds from
-    _SHADE_START, held by _SHADE_PRIOR, kept within _SHADE_RANGE)."""
-    return _shaded((total, level), np.arange(3), covered, None)[1]
+    ``bounds.start``, held by _SHADE_PRIOR, kept within ``bounds``)."""
+    return _shaded((total, level), np.arange(3), covered, None, np.full(2, bounds.start), _DEFAULT_HOLD, bounds)[1]
 
 
 def _shaded(lengths: tuple[np.ndarray, np.ndarray], kinds: np.ndarray, covered: np.ndarray, shades: np.ndarray | None,
-            start: np.ndarray = _DEFAULT_START, hold: np.ndarray = _DEFAULT_HOLD) -> tuple[np.ndarray, np.ndarray]:
+            start: np.ndarray, hold: np.ndarray, bounds: ShadeBounds) -> tuple[np.ndarray, np.ndarray]:
     """The sums (P, N) the faces' pixels in each window and its level pixel (``lengths``: each P, N, F;
     face f of kind ``kinds[f]``) predict with the side ``shades``, or with the best (None: from
-    ``start``, held there by ``hold``, px^2 per unit shade^2); and the shades (P, 2). Compiled
+    ``start``, held there by ``hold``, px^2 per unit shade^2, kept within ``bounds``); and the shades
+    (P, 2). Compiled
     (tracker/facecover.py): in numpy's small whole-array steps the shades' solution cost as much as
     the faces' clipping."""
     from tracker.facecover import shaded_sums  # noqa: PLC0415 (compiled: see box.lengths_in_faces)
@@ -185,8 +188,8 @@ def _shaded(lengths: tuple[np.ndarray, np.ndarray], kinds: np.ndarray, covered: 
     given = np.zeros(2) if shades is None else np.asarray(shades, dtype=np.float64)
     shaded_sums(total, level, np.ascontiguousarray(kinds, dtype=np.int64),
                 np.ascontiguousarray(covered, dtype=np.float64), given, shades is None,
-                np.asarray(start, dtype=np.float64), np.asarray(hold, dtype=np.float64), *_SHADE_RANGE, _SHADE_ROUNDS,
-                _MIN_LEVEL, sums, solved)
+                np.asarray(start, dtype=np.float64), np.asarray(hold, dtype=np.float64), bounds.low, bounds.high,
+                _SHADE_ROUNDS, _MIN_LEVEL, sums, solved)
     return sums, solved
 
 
@@ -215,10 +218,11 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     free = [*_FOOTPRINT, *([_H] if free_height else [])]
     floor_px = _TRIM_SIGMAS * sum_sigma_px if keep_model_errors else 0.0
     params = box_params(start, height_mm)
-    shade_start, shade_hold = _DEFAULT_START, _DEFAULT_HOLD
+    bounds = windows.shade_bounds
+    shade_start, shade_hold = np.full(2, bounds.start), _DEFAULT_HOLD
     if shade_prior is not None:
         known = np.isfinite(shade_prior.sigma)
-        shade_start = np.where(known, shade_prior.shades, _SHADE_START)
+        shade_start = np.where(known, shade_prior.shades, bounds.start)
         shade_hold = np.where(known, (sum_sigma_px / np.array(shade_prior.sigma)) ** 2, _DEFAULT_HOLD)
 
     # Each takes boxes (P rows of parameters) and gives their residuals (P, N) over the rows ``which``.
@@ -242,7 +246,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
         # from its edge, and the fit starts it middling. A narrower one trades them, and its fit ends
         # in that valley near where it starts: at the shade the track's views tell (started there,
         # a 60 mm box's wide faces took the views' slightly biased shades: 0.44 -> 0.79 mm off).
-        middle = np.where(_side_widths_px(*camera.faces(params), px_per_norm) >= windows.span_px / 2, _SHADE_START,
+        middle = np.where(_side_widths_px(*camera.faces(params), px_per_norm) >= windows.span_px / 2, bounds.start,
                           shade_start)
 
     def middling(p: np.ndarray, which: np.ndarray | slice = slice(None)) -> np.ndarray:
@@ -299,10 +303,10 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
             kept = windows if isinstance(which, slice) else windows.subset(which)
             # The shades these sums are best predicted with at the fit's box (``at`` their residuals).
             solved = _shaded(lengths_in_faces(kept, polygons), kinds, kept.covered_px, None, shade_start,
-                             shade_hold)[1][0]
+                             shade_hold, bounds)[1][0]
             at = sums(params[None], which, solved)[0]
             return _view_shades(lambda p, s: sums(p, which, s), params, solved, at, free, floor,
-                                widths >= _OUTSIDE_MIN_WIDTH_PX)
+                                widths >= _OUTSIDE_MIN_WIDTH_PX, bounds)
 
         # The shades are told over every window within _TRIM_SIGMAS sum sigmas, not only those the fit
         # kept: a fit lent shades drops the windows of a sliver they do not explain, and the rest tell
@@ -358,15 +362,15 @@ def _side_widths_px(polygons: np.ndarray, kinds: np.ndarray, px_per_norm: float)
 
 
 def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarray, free: list[int],
-                 floor: np.ndarray, wide: np.ndarray) -> ViewShades:
+                 floor: np.ndarray, wide: np.ndarray, bounds: ShadeBounds) -> ViewShades:
     """What one view tells of its side shades on its own: a Gauss-Newton step on the sums alone from the
     fit's result (``params``, and the ``shades`` solved there, which a prior may have held), the box's
     ``free`` parameters marginalised out (the pose and size differ from view to view; a sliver's shade
     trades with its edge). ``residuals(boxes, shades)``: the sums' residuals (P, N) with those shades,
     ``r`` theirs at the fit's result; ``floor``: the least variance of each (end faces, long faces);
     ``wide``: whether each is wide enough to tell a shade no side has (ViewShades.outside). A kind of
-    face the view does not show, or whose step leaves _SHADE_RANGE or reaches _SHADE_TOLD_MAX, gets an
-    infinite variance."""
+    face the view does not show, or whose step leaves the shades ``bounds.told``, gets an infinite
+    variance."""
     box_jac = (residuals(params + _difference_steps(free, len(params)), shades) - r) / _STEP[free][:, None]
     shade_jac = np.stack([(residuals(params[None], shades + d)[0] - r) / _SHADE_STEP for d in np.eye(2) * _SHADE_STEP])
     jac = np.vstack([box_jac, shade_jac]).T
@@ -388,9 +392,11 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
     # A step that leaps farther than the shades a side may have span is no reading of the shade (the
     # linear model of a face the view hardly tells: the tests' 15 mm box at 10 deg, its end face solved
     # at 0.1 and stepped to 3.0 +- 0.9, flagged its own height and the vote chose 20 mm).
-    near = np.abs(own - shades) <= _SHADE_RANGE[1] - _SHADE_RANGE[0]
-    outside = wide & near & ((own + margin < _SHADE_RANGE[0]) | (own - margin >= _SHADE_TOLD_MAX))
-    variances[~(variances > 0) | (own < _SHADE_RANGE[0]) | (own >= _SHADE_TOLD_MAX)] = math.inf
+    near = np.abs(own - shades) <= bounds.high - bounds.low
+    low, high = bounds.possible
+    outside = wide & near & ((own + margin < low) | (own - margin >= high))
+    low, high = bounds.told
+    variances[~(variances > 0) | (own < low) | (own >= high)] = math.inf
     return ViewShades((float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])),
                       (bool(outside[0]), bool(outside[1])), *joint)
 

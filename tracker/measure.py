@@ -34,6 +34,7 @@ from tracker.calibration import apply_homography
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, rectangle_corners, refine_rect
 from tracker.height import HeightTrial, vote_due
+from tracker.shadebounds import ShadeBounds, shade_bounds
 from tracker.split import SplitRule, split_blob
 from tracker.undistort import BeltMapper
 
@@ -443,13 +444,14 @@ class Measurer:
         if cv2.countNonZero(belt) < 16 or cv2.countNonZero(inner) < 16:
             return None
         # Lighting gain of this frame against the reference, from the belt around the blob.
-        gain = _median_u8(img8, belt) / max(_median_u8(cv2.convertScaleAbs(ref), belt), 1.0)
+        belt_here = _median_u8(img8, belt)
+        gain = belt_here / max(_median_u8(cv2.convertScaleAbs(ref), belt), 1.0)
         belt_level = gain * ref
         inside = piece > 0
         k = HALF_WINDOW_PX
         rows = _boundary_crossings(img8, belt_level, inside, k, blocked)
         cols = _boundary_crossings(img8.T, belt_level.T, inside.T, k, None if blocked is None else blocked.T)
-        return _Crossed(rows, cols, (x0, y0), _median_u8(img8, inner))
+        return _Crossed(rows, cols, (x0, y0), _median_u8(img8, inner), belt_here)
 
     def _box_edges(self, crossed: _Crossed) -> _Edges | None:
         """A box's sub-pixel edge points, each read against the face next to its edge (its side faces are
@@ -462,7 +464,8 @@ class Measurer:
         points = _edge_points_of(rows, cols, levels)
         if len(points) < _MIN_EDGE_POINTS:
             return None
-        return _Edges(points + crossed.origin, rows, cols, crossed.origin, levels)
+        return _Edges(points + crossed.origin, rows, cols, crossed.origin, levels,
+                      shade_bounds(crossed.part_level, crossed.belt_level))
 
     def _readable(self, crossings: _Crossings, half_window: int) -> _Crossings | None:
         """A box's windows whose face (one pixel, see _Crossings.face_levels) differs enough from the belt
@@ -491,7 +494,7 @@ class Measurer:
         ends = self.mapper.to_norm(np.concatenate([inner, inner + 2 * k * outward]))
         # The level pixel (see _Crossings.face_levels) is the window's (k+2)-th from its inner end.
         return EdgeWindows(ends[:n], (ends[n:] - ends[:n]) / (2 * k), covered, 2.0 * k, (k - 2.0, k - 1.0),
-                           self._blur_px)
+                           self._blur_px, edges.shade_bounds)
 
 
 @dataclass(frozen=True)
@@ -530,6 +533,7 @@ class _Crossed:
     cols: _Crossings  # transposed: their "rows" are columns
     origin: tuple[int, int]  # the examined window's first pixel (x0, y0)
     part_level: float  # the part's own level (its inner pixels' median)
+    belt_level: float  # the belt's around it
 
 
 @dataclass(frozen=True)
@@ -541,6 +545,7 @@ class _Edges:
     cols: _Crossings
     origin: tuple[int, int]
     levels: tuple[np.ndarray, np.ndarray]  # the face each window was read against (per window)
+    shade_bounds: ShadeBounds  # the shades its side faces may have (a dark part's are others)
 
 
 def _edge_points_of(rows: _Crossings, cols: _Crossings, levels: tuple) -> np.ndarray:
