@@ -32,6 +32,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/heights_random.py
 	$(BIN)/python bench/heights_random.py --any-height
 	$(BIN)/python bench/heights_random.py --tilt 25 --scenes 15
+	$(BIN)/python bench/heights_random.py --dark --scenes 60
 	$(BIN)/python bench/issue_scenes.py
 	$(BIN)/python bench/view_heights.py
 
