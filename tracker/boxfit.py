@@ -40,10 +40,10 @@ CONVERGED_STEPS = 1.0
 PRECISE_STEPS = 0.05
 # How weakly the side shades' prior holds them (px of residual per unit of shade): a side face too
 # narrow to show its shade leaves the shade undecided. Where the shades start, where a fit keeps them
-# and which a view tells: the windows' ShadeBounds (tracker/shadebounds.py). A view tells none as
-# bright as the top: such a side looks like more of the top, and lent, it lets a box of another height
-# pass for the part (when the vote's boxes learnt shades too, a flat part's 5-10 mm boxes learnt
-# 1.0-1.2 and led its vote).
+# and which a view tells: the windows' ShadeBounds (tracker/shadebounds.py). A view tells none that
+# reads like the top: such a side looks like more of the top, and lent, it lets a box of another
+# height pass for the part (when the vote's boxes learnt shades too, a flat part's 5-10 mm boxes
+# learnt 1.0-1.2 and led its vote).
 _SHADE_PRIOR = 0.02
 _DEFAULT_HOLD = np.full(2, _SHADE_PRIOR**2)
 # How many of its sigmas a view's shade has to lie outside the shades a side may have for the view to
@@ -177,9 +177,8 @@ def _shaded(lengths: tuple[np.ndarray, np.ndarray], kinds: np.ndarray, covered: 
     """The sums (P, N) the faces' pixels in each window and its level pixel (``lengths``: each P, N, F;
     face f of kind ``kinds[f]``) predict with the side ``shades``, or with the best (None: from
     ``start``, held there by ``hold``, px^2 per unit shade^2, kept within ``bounds``); and the shades
-    (P, 2). Compiled
-    (tracker/facecover.py): in numpy's small whole-array steps the shades' solution cost as much as
-    the faces' clipping."""
+    (P, 2). Compiled (tracker/facecover.py): in numpy's small whole-array steps the shades' solution
+    cost as much as the faces' clipping."""
     from tracker.facecover import shaded_sums  # noqa: PLC0415 (compiled: see box.lengths_in_faces)
 
     total, level = lengths
