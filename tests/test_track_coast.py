@@ -78,8 +78,9 @@ def test_a_track_still_ends_when_hidden_longer_than_the_coast_time():
 def test_a_blob_whose_view_tells_another_size_than_its_lent_one_is_not_the_part():
     """A box fitted with its track's size lent is pulled to that size: a piece of the part (noise cut
     its blob in two at the edge of a faint side) was fitted at the whole part's 76 mm, 20 mm off along
-    the belt, and broke the track's velocity. The size the view tells on its own (own_size_mm) shows
-    it: the track coasts through that frame, as through a partly hidden part's, and keeps its pose."""
+    the belt, and broke the track's velocity. The size a piece's view tells on its own (own_size_mm)
+    shows it: the track coasts through that frame, as through a partly hidden part's, and keeps its
+    pose."""
     from tracker.geometry import Rect
     from tracker.measure import Measurement
     from tracker.track import Tracker
@@ -87,15 +88,17 @@ def test_a_blob_whose_view_tells_another_size_than_its_lent_one_is_not_the_part(
     tracker = Tracker(TrackConfig())
     step_ns, speed_mm_s = round(1e9 / FPS), 300.0
 
-    def blob(i: int, dx_mm: float = 0.0, own: tuple[float, float] | None = (76.0, 36.0)) -> Measurement:
+    def blob(i: int, dx_mm: float = 0.0, own: tuple[float, float] | None = (76.0, 36.0),
+             piece: bool = False) -> Measurement:
         x = -200.0 + speed_mm_s * i / FPS + dx_mm
-        return Measurement(Rect(x, 0.0, 0.0, 76.0, 36.0), False, (0, 0, 1, 1), (0.0, 0.0), 200, own_size_mm=own)
+        return Measurement(Rect(x, 0.0, 0.0, 76.0, 36.0), False, (0, 0, 1, 1), (0.0, 0.0), 200, piece=piece,
+                           own_size_mm=own)
 
     for i in range(15):
         (part,) = tracker.step([blob(i)], i * step_ns)
     assert part.measured
     # The piece: 20 mm ahead, fitted at the lent 76 mm, its own view 52 mm long.
-    (part,) = tracker.step([blob(15, 20.0, own=(52.0, 36.0))], 15 * step_ns)
+    (part,) = tracker.step([blob(15, 20.0, own=(52.0, 36.0), piece=True)], 15 * step_ns)
     assert not part.measured and abs(part.x_mm - (-200.0 + speed_mm_s * 15 / FPS)) < 0.5, part
     (part,) = tracker.step([blob(16)], 16 * step_ns)
     assert part.measured and abs(part.vx_mm_s - speed_mm_s) < 5.0, part
