@@ -392,10 +392,9 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
     # linear model of a face the view hardly tells: the tests' 15 mm box at 10 deg, its end face solved
     # at 0.1 and stepped to 3.0 +- 0.9, flagged its own height and the vote chose 20 mm).
     near = np.abs(own - shades) <= bounds.high - bounds.low
-    low, high = bounds.possible
-    outside = wide & near & ((own + margin < low) | (own - margin >= high))
-    low, high = bounds.told
-    variances[~(variances > 0) | (own < low) | (own >= high)] = math.inf
+    (possible_from, possible_to), (told_from, told_to) = bounds.possible, bounds.told
+    outside = wide & near & ((own + margin < possible_from) | (own - margin >= possible_to))
+    variances[~(variances > 0) | (own < told_from) | (own >= told_to)] = math.inf
     return ViewShades((float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])),
                       (bool(outside[0]), bool(outside[1])), *joint)
 

@@ -154,15 +154,14 @@ class Runner:
         self.max_frames = max_frames
         self.summary = RunSummary()
         self._overrun_hold_ns = round(overrun_hold_s * 1e9)
-        self._overruns_seen = 0
         self._last_overrun_ns: int | None = None
 
     def _check_overruns(self, health: Health, now_ns: int) -> None:
         """The source's overruns into the health word: fault 4 while frames are being dropped (see
         OVERRUN_FAULT_HOLD_S); the count stays for the status line and the summary."""
+        dropped = self.source.overruns > health.overruns
         health.overruns = self.source.overruns
-        if health.overruns > self._overruns_seen:
-            self._overruns_seen = health.overruns
+        if dropped:
             self._last_overrun_ns = now_ns
             health.set_fault(FAULT_OVERRUN)
         elif self._last_overrun_ns is not None and now_ns - self._last_overrun_ns >= self._overrun_hold_ns:
