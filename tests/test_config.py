@@ -16,6 +16,8 @@ from tracker.cli import main
     (json.dumps({"track": {"height_unconverged_sigma_mm": 0.2}}).encode(),
      "track.height_unconverged_sigma_mm: expected >= height_converged_sigma_mm (0.3), got 0.2"),
     (json.dumps({"measure": {"model_sigma_px": -0.01}}).encode(), "measure.model_sigma_px: expected >= 0, got -0.01"),
+    (json.dumps({"measure": {"smooth_texture_ratio": -1}}).encode(),
+     "measure.smooth_texture_ratio: expected >= 0, got -1"),
     (json.dumps({"bogus": {}}).encode(), "unknown sections"),
     (json.dumps({"segment": 3}).encode(), "segment: expected an object"),
     (json.dumps([1]).encode(), "expected a JSON object"),

@@ -650,13 +650,13 @@ def test_on_a_textured_moving_belt_each_part_keeps_one_track_and_its_height():
     """A real belt: a knurl moving with the parts, sensor noise, an MPEG-4 round trip, and the belt's
     own motion measured (parts are tracked in the belt's frame). The views a height is voted on are
     told apart by where the camera saw them, and the trials' poses move into the belt's frame with the
-    rest (before, they stayed in the world's: every frame a new track, hundreds of mm off). Most views
-    tell the height only weakly here (near the middle of the view); those that tell it, near the far
-    edge, lean with the textured model's 1 px smoothing (a blurred image: README, "auto in a blurred
-    image") and the knurl: measured, converged on 19.5-19.7 mm here, and 0.3-2.7 mm off at worst on six
-    seeds of this scene (0.85 mm with no knurl, noise nor codec and the belt's true motion given).
-    Measured: one track, its centroid 0.5 mm off on average (0.08 mm with the height given, 4 mm
-    measured as flat)."""
+    rest (before, they stayed in the world's: every frame a new track, hundreds of mm off). The part
+    stands out from the knurl (its texture 0.026 of the part's contrast), so its edges are read from
+    the frame itself, not through the textured model's smoothing (measure.smooth_texture_ratio), which
+    spreads the side faces its height is told by: through it the part converged after 73 % of its
+    crossing, 2.2 mm off (0.7-2.4 mm on six seeds of this scene). Measured: converged after 19 %, within
+    0.44 mm from then on (0.4-0.6 mm on the six seeds: the knurl and codec's lean), centroid 0.09 mm mean
+    before and after (0.08 mm with the height given, 4 mm measured as flat)."""
     cam = CameraSpec(width=480, height=360, focal_px=420.0, tilt_deg=10, yaw_deg=15)
     part = PartSpec(80, 50, 20.0, -420, -30, 20, 300, 40, omega_deg_s=20.0, intensity=190)
     scene = SceneSpec(cam, (part,), fps=30, n_frames=90, supersample=BOX_SUPERSAMPLE, blur_samples=3, noise_sigma=2.0,
@@ -670,10 +670,14 @@ def test_on_a_textured_moving_belt_each_part_keeps_one_track_and_its_height():
     measured = [(o, truth["objects"][0]) for r, (_, truth) in zip(results, frames, strict=True)
                 for o in r.objects if o.measured and truth["objects"][0] is not None]
     assert len(measured) > 40
-    assert np.mean([math.hypot(o.x_mm - t["x_mm"], o.y_mm - t["y_mm"]) for o, t in measured]) <= 1.0
-    # Converged means near (the smoothing's lean, 2.7 mm at worst over six seeds): never a wrong tried height.
-    heights = [o.height_mm for o, _ in measured if o.height_converged]
-    assert heights and max(abs(h - part.height_mm) for h in heights) <= 2.5, heights
+    # The issue's bounds: converged within the first third, then the height within 0.5 mm and the
+    # centroid within 0.2 mm mean; within 1 mm before.
+    converged = [i for i, (o, _) in enumerate(measured) if o.height_converged]
+    assert converged and converged[0] <= len(measured) / 3, (converged[:1], len(measured))
+    after = measured[converged[0] :]
+    assert max(abs(o.height_mm - part.height_mm) for o, _ in after) <= 0.5, [o.height_mm for o, _ in after]
+    error = [math.hypot(o.x_mm - t["x_mm"], o.y_mm - t["y_mm"]) for o, t in measured]
+    assert np.mean(error[converged[0] :]) <= 0.2 and np.mean(error[: converged[0]]) <= 1.0, error
 
 
 def test_with_an_approximate_calibration_parts_are_measured_flat_and_the_log_says_why(caplog):

@@ -387,7 +387,7 @@ def test_a_view_whose_two_fits_explain_it_alike_tells_its_shape_no_surer_than_th
     pipeline = Pipeline(Renderer(_box_scene(20.0, 10.0)).calibration,
                         TrackerConfig(measure=MeasureConfig(estimate_height=True)))
     fits = iter([other, best])  # from the pose, then from the plane's rectangle
-    told = pipeline.measurer._own_shape(best, lambda *a, **k: next(fits), True, 20.0)
+    told = pipeline.measurer._own_shape(best, lambda *a, **k: next(fits), True, 20.0, sharp=True)
     cov = np.linalg.inv(told.shape_info)
     assert cov @ told.shape_vec == pytest.approx([80.0, 50.0, 20.0], abs=1e-6)
     if alike:

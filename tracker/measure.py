@@ -34,6 +34,7 @@ from tracker.calibration import apply_homography
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, rectangle_corners, refine_rect
 from tracker.height import HeightTrial, vote_due
+from tracker.segment.textured import SmoothedView
 from tracker.shadebounds import ShadeBounds, shade_bounds
 from tracker.split import SplitRule, split_blob
 from tracker.undistort import BeltMapper
@@ -113,15 +114,11 @@ class Measurement:
 
 class Measurer:
     def __init__(self, mapper: BeltMapper, config: MeasureConfig, smoothing_px: float = 0.0) -> None:
-        """``smoothing_px``: the blur (Gaussian sigma) the pipeline applies to frames before measuring."""
+        """``smoothing_px``: the belt model's smoothing (a Gaussian's sigma, px; 0: none), through which the
+        edges of parts whose contrast the belt's texture disturbs are read (measure.smooth_texture_ratio)."""
         self.mapper = mapper
         self.config = config
-        # The blur edges are seen through: the camera's own, and the pipeline's on top.
-        self._blur_px = math.hypot(config.edge_blur_px, smoothing_px)
-        # Side shades are told (learnt, voted on) in a sharp image only: a blur spreads a sliver's shade
-        # into its neighbours, and views misread it.
-        self._sharp = self._blur_px == 0
-        self._tell_shades = config.learn_shades and self._sharp
+        self._smoothing_px = smoothing_px
         self._width, self._height = mapper.calibration.size
         # Conservative pixel-area pre-filter, so tiny specks are never mapped at all.
         self._min_area_px = 0.5 * config.min_area_mm2 / mapper.max_mm_per_px() ** 2
@@ -217,7 +214,7 @@ class Measurer:
             elif edges is not None:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
                 box, trials = self._fit_box(points_norm, self._windows(edges), rect, known)
-                if trials and flat_rect is not None and self._sharp and cfg.vote_on_shades:
+                if trials and flat_rect is not None and edges.blur_px == 0 and cfg.vote_on_shades:
                     uneven = _uneven_faces(edges, points_mm, flat_rect)
                     trials = tuple(replace(t, faces_uneven=uneven) if t.height_mm == 0 else t for t in trials)
                 if box is not None:
@@ -297,6 +294,10 @@ class Measurer:
         heights estimated while its track votes (tracker/height.py), the trials at every height it votes on."""
         cfg = self.config
         starts: dict[float, Rect] = {}
+        # Side shades are told (learnt, voted on) in a sharp image only: a blur spreads a sliver's shade
+        # into its neighbours, and views misread it.
+        sharp = windows.blur_px == 0
+        tell_shades = cfg.learn_shades and sharp
 
         def fit(height_mm: float, start: Rect | None = None, **kwargs) -> BoxFit | None:
             # From ``start``, or the outline measured on the plane of its top (where the measurement maps it
@@ -315,7 +316,7 @@ class Measurer:
             # back to the track (from a sharp image only, as below).
             return fit(cfg.part_height_mm, size_prior=self._size_of(known),
                        shade_prior=None if known is None else known.shades,
-                       tell_shades=self._tell_shades and cfg.part_height_mm > 0), ()
+                       tell_shades=tell_shades and cfg.part_height_mm > 0), ()
         if known is not None and known.height_mm is not None:
             # Its height voted on, being refined. Its pose: a box of that height, its size and side shades
             # lent (with the height free too, a thin part's fit wanders along the valley where height
@@ -323,8 +324,8 @@ class Measurer:
             # image only (a blur spreads a sliver's shade into its neighbours, and views misread it:
             # 0.2-0.5 against a rendered 0.5-0.7, with the camera's or the textured model's blur).
             pose = fit(known.height_mm, size_prior=self._size_of(known), shade_prior=known.shades,
-                       tell_shades=self._tell_shades)
-            return self._own_shape(pose, fit, known.refine, known.height_mm), ()
+                       tell_shades=tell_shades)
+            return self._own_shape(pose, fit, known.refine, known.height_mm, sharp), ()
         # Voted on, or new: at each height of height_starts_mm when the view votes, its pose at the
         # height leading the vote (a new part's: the height that fits it best).
         lead = None if known is None else known.leading_mm
@@ -333,8 +334,8 @@ class Measurer:
             # and what the view tells of the shape, kept until the vote decides (tracker/height.py).
             if lead in (None, 0.0):
                 return None, ()
-            pose = fit(lead, shade_prior=known.shades, tell_shades=self._tell_shades)
-            return self._own_shape(pose, fit, known.refine, lead), ()
+            pose = fit(lead, shade_prior=known.shades, tell_shades=tell_shades)
+            return self._own_shape(pose, fit, known.refine, lead, sharp), ()
         self._votes_left -= 1
         boxes, trials = self._trials(fit, rect, windows, cfg.height_starts_mm)
         if lead == 0.0 or not boxes:
@@ -344,7 +345,7 @@ class Measurer:
         box = next((b for b in boxes if b.height_mm == lead), None)
         if box is None and lead is not None and lead not in cfg.height_starts_mm:
             # The leading height lies between those tried: its own box (whose shades the track may learn).
-            box = fit(lead, tell_shades=self._tell_shades)
+            box = fit(lead, tell_shades=tell_shades)
         # A vote's view tells its own shape too, as a view between votes does (kept until the vote
         # decides): the first views, near the edge of the view, tell a height best (bench/heights_random.py
         # scene 10, 20 mm at 10 deg: those between the votes told it to 0.35 mm, converging only after 39 %
@@ -354,13 +355,13 @@ class Measurer:
             # part (no height leads yet) tells its shape as that box, if it has sides.
             best = replace(min(boxes, key=lambda f: f.rms_px), view_shades=None)
             told = lead is None and best.height_mm > 0
-            return (self._own_shape(best, fit, True, best.height_mm) if told else best), trials
+            return (self._own_shape(best, fit, True, best.height_mm, sharp) if told else best), trials
         # Its shades go to the track with learn_shades, which learns them from the view that decides its
         # vote on (if the vote chooses this box's height, to track.view_height_sigma_mm).
         box = box if cfg.learn_shades else replace(box, view_shades=None)
-        return self._own_shape(box, fit, known.refine, lead), trials
+        return self._own_shape(box, fit, known.refine, lead, sharp), trials
 
-    def _own_shape(self, pose: BoxFit | None, fit, refine: bool, height_mm: float) -> BoxFit | None:
+    def _own_shape(self, pose: BoxFit | None, fit, refine: bool, height_mm: float, sharp: bool) -> BoxFit | None:
         """``pose`` (a box of ``height_mm``) with what its view tells of the part's shape on its own (when
         the track wants it, ``refine``): fitted again with the height and size free, nothing lent,
         from the pose (in a sharp image) and from the plane's rectangle at that height, the better kept
@@ -378,7 +379,7 @@ class Measurer:
         # textured belt model smooths): there the fits from the pose held the track near a wrong height
         # (the tests' 20 mm box on a knurled belt converged on 15.8-16.5 mm; 19.5-19.7 from the plane's
         # rectangle alone).
-        near = [fit(pose.height_mm, start=pose.rect, near=True, **_OWN)] if self._sharp else []
+        near = [fit(pose.height_mm, start=pose.rect, near=True, **_OWN)] if sharp else []
         views = [f for f in (*near, fit(height_mm, **_OWN)) if f is not None]
         if not views:
             return pose
@@ -396,19 +397,20 @@ class Measurer:
                 heights_mm: tuple[float, ...]) -> tuple[list[BoxFit], tuple[HeightTrial, ...]]:
         """A box of each height, its size free: those that fit, and the trials."""
         cfg = self.config
+        sharp = windows.blur_px == 0
         # Their shades: for the vote's check, and for the track to learn from the view that decides it.
-        tell = self._sharp and (cfg.vote_on_shades or cfg.learn_shades)
+        tell = sharp and (cfg.vote_on_shades or cfg.learn_shades)
         # Each height's fit judged over the windows some height's kept (see comparable_ms_px2), in a sharp
         # image: in a blurred one (the textured belt model smooths) a flat part's fit drops more of the
         # windows its knurl disturbs than a box's, whose side shades take some of it up (the tests' flat
         # parts on a knurled belt led at 2.5-10 mm for most of their crossing: 0.64 mm off, 0.37 with
         # each fit's own RMS).
-        fits = [(h, fit(h, tell_shades=tell and h > 0, keep_residuals=self._sharp, keep_model_errors=True))
+        fits = [(h, fit(h, tell_shades=tell and h > 0, keep_residuals=sharp, keep_model_errors=True))
                 for h in heights_mm]
         boxes = [f for _, f in fits if f is not None]
         if not boxes:
             return [], ()
-        ms = iter(comparable_ms_px2(boxes, cfg.sum_sigma_px) if self._sharp else [f.rms_px**2 for f in boxes])
+        ms = iter(comparable_ms_px2(boxes, cfg.sum_sigma_px) if sharp else [f.rms_px**2 for f in boxes])
         # A height no box of explains (worse than box_max_rms_px) votes as if it had just that.
         trials = tuple(HeightTrial(h, rect, cfg.box_max_rms_px, len(windows), fitted=False) if f is None else
                        HeightTrial(h, f.rect, math.sqrt(next(ms)), f.windows, _size_variances(f),
@@ -443,15 +445,32 @@ class Measurer:
         inner = cv2.erode(piece, _ERODE)
         if cv2.countNonZero(belt) < 16 or cv2.countNonZero(inner) < 16:
             return None
-        # Lighting gain of this frame against the reference, from the belt around the blob.
-        belt_here = _median_u8(img8, belt)
-        gain = belt_here / max(_median_u8(cv2.convertScaleAbs(ref), belt), 1.0)
-        belt_level = gain * ref
+        ref_here = max(_median_u8(cv2.convertScaleAbs(ref), belt), 1.0)
+
+        def levels(image: np.ndarray) -> tuple[float, np.ndarray, float]:
+            # The belt's level around the blob, its model scaled by this frame's lighting gain against
+            # it there, and the part's own.
+            belt_here = _median_u8(image, belt)
+            return belt_here, belt_here / ref_here * ref, _median_u8(image, inner)
+
+        belt_here, belt_level, part_level = levels(img8)
+        blur_px = self.config.edge_blur_px
+        if self._smoothing_px and self._texture_strong(img8, belt_level, belt, part_level - belt_here):
+            img8 = SmoothedView(frame, self._smoothing_px)[y0:y1, x0:x1]
+            blur_px = math.hypot(blur_px, self._smoothing_px)
+            belt_here, belt_level, part_level = levels(img8)
         inside = piece > 0
         k = HALF_WINDOW_PX
         rows = _boundary_crossings(img8, belt_level, inside, k, blocked)
         cols = _boundary_crossings(img8.T, belt_level.T, inside.T, k, None if blocked is None else blocked.T)
-        return _Crossed(rows, cols, (x0, y0), _median_u8(img8, inner), belt_here)
+        return _Crossed(rows, cols, (x0, y0), part_level, belt_here, blur_px)
+
+    def _texture_strong(self, img8: np.ndarray, belt_level: np.ndarray, belt: np.ndarray, contrast: float) -> bool:
+        """Whether the belt's texture around a part (its pixels' median deviation from the belt model) is
+        strong against the part's ``contrast`` (measure.smooth_texture_ratio): its edges are then read
+        through the belt model's smoothing."""
+        deviation = _median_u8(cv2.absdiff(img8, cv2.convertScaleAbs(belt_level)), belt)
+        return deviation > self.config.smooth_texture_ratio * abs(contrast)
 
     def _box_edges(self, crossed: _Crossed) -> _Edges | None:
         """A box's sub-pixel edge points, each read against the face next to its edge (its side faces are
@@ -465,7 +484,7 @@ class Measurer:
         if len(points) < _MIN_EDGE_POINTS:
             return None
         return _Edges(points + crossed.origin, rows, cols, crossed.origin, levels,
-                      shade_bounds(crossed.part_level, crossed.belt_level))
+                      shade_bounds(crossed.part_level, crossed.belt_level), crossed.blur_px)
 
     def _readable(self, crossings: _Crossings, half_window: int) -> _Crossings | None:
         """A box's windows whose face (one pixel, see _Crossings.face_levels) differs enough from the belt
@@ -494,7 +513,7 @@ class Measurer:
         ends = self.mapper.to_norm(np.concatenate([inner, inner + 2 * k * outward]))
         # The level pixel (see _Crossings.face_levels) is the window's (k+2)-th from its inner end.
         return EdgeWindows(ends[:n], (ends[n:] - ends[:n]) / (2 * k), covered, 2.0 * k, (k - 2.0, k - 1.0),
-                           self._blur_px, edges.shade_bounds)
+                           edges.blur_px, edges.shade_bounds)
 
 
 @dataclass(frozen=True)
@@ -534,6 +553,7 @@ class _Crossed:
     origin: tuple[int, int]  # the examined window's first pixel (x0, y0)
     part_level: float  # the part's own level (its inner pixels' median)
     belt_level: float  # the belt's around it
+    blur_px: float  # the image's blur the windows were read through (the camera's, and any smoothing)
 
 
 @dataclass(frozen=True)
@@ -546,6 +566,7 @@ class _Edges:
     origin: tuple[int, int]
     levels: tuple[np.ndarray, np.ndarray]  # the face each window was read against (per window)
     shade_bounds: ShadeBounds  # the shades its side faces may have (a dark part's are others)
+    blur_px: float  # as _Crossed's
 
 
 def _edge_points_of(rows: _Crossings, cols: _Crossings, levels: tuple) -> np.ndarray:

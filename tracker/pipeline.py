@@ -23,15 +23,15 @@ from tracker.segment import make_segmenter
 from tracker.segment.guard import ClutterGuard
 from tracker.segment.motion import BeltMotion
 from tracker.segment.roi import roi_mask, roi_polygon_px
-from tracker.segment.textured import SmoothedView
 from tracker.track import Tracker
 from tracker.undistort import BeltMapper
 
 log = logging.getLogger(__name__)
 
 STAGES = ("segment", "undistort", "measure", "track")
-# On a textured belt, edges are measured through this slight blur (px): it averages the belt's
-# texture over neighbouring rows too, and as it is symmetric the edges stay where they are.
+# On a textured belt, the edges of parts whose contrast its texture disturbs are measured through this
+# slight blur (px; measure.smooth_texture_ratio): it averages the belt's texture over neighbouring rows
+# too, and as it is symmetric the edges stay where they are.
 _TEXTURE_BLUR_PX = 1.0
 
 
@@ -97,8 +97,7 @@ class Pipeline:
         guarded = self.guard(mask)
         t1 = clock()
         undistort_before = self.mapper.spent_ns
-        seen = frame if self.motion is None else SmoothedView(frame, _TEXTURE_BLUR_PX)
-        measurements = self.measurer(seen, self.segmenter.reference, guarded.mask, self._known(t_ns))
+        measurements = self.measurer(frame, self.segmenter.reference, guarded.mask, self._known(t_ns))
         if guarded.at_edge:
             # A blob reaching the edge of the region of interest may go on outside it: clipped.
             measurements = [dataclasses.replace(m, clipped=True) if m.bbox_px in guarded.at_edge else m
