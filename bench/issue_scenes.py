@@ -68,13 +68,13 @@ def measure_scene(name: str) -> list[dict]:
     spec = SCENES[name]()
     renderer = Renderer(spec)
     frames = [renderer.render(i) for i in range(spec.n_frames)]
-    truths = [t for _, t in frames]
+    images, truths = [f for f, _ in frames], [t for _, t in frames]
     rows = []
-    auto = poses_of(spec, frames, MeasureConfig(estimate_height=True))
+    auto = poses_of(spec, images, MeasureConfig(estimate_height=True))
     for k, part in enumerate(spec.parts):
         row = {"scene": name, "part": k, "height_mm": part.height_mm}
         if len(spec.parts) == 1:
-            given = evaluate(poses_of(spec, frames, MeasureConfig(part_height_mm=part.height_mm)), truths,
+            given = evaluate(poses_of(spec, images, MeasureConfig(part_height_mm=part.height_mm)), truths,
                              skip_first=2).summary()
             row |= {"given_mean_mm": given["centroid_mean_mm"], "given_p95_mm": given["centroid_p95_mm"],
                     "given_angle_deg": given["angle_mean_deg"]}

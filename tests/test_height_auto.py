@@ -18,7 +18,7 @@ import pytest
 from conftest import BOX_SUPERSAMPLE, rendered, run_pipeline
 from test_heights import _box_scene, _dark_box_scene
 from test_textured_knurl import _scene as knurl_scene
-from textured_support import mpeg4_round_trip, textured_run
+from textured_support import textured_run
 
 from tracker.boxfit import ViewShades
 from tracker.config import MeasureConfig, SegmentConfig, TrackConfig, TrackerConfig
@@ -27,7 +27,7 @@ from tracker.geometry import Rect
 from tracker.height import HeightEstimate, HeightTrial, _rect_at
 from tracker.measure import Measurement
 from tracker.pipeline import Pipeline
-from tracker.synthetic import CameraSpec, PartSpec, SceneSpec
+from tracker.synthetic import CameraSpec, PartSpec, SceneSpec, mpeg4_round_trip
 
 
 def _auto(height_mm: float, tilt_deg: float, scene: SceneSpec | None = None, **measure) -> list[tuple[dict, dict]]:

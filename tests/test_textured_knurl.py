@@ -11,13 +11,12 @@ import dataclasses
 import numpy as np
 import pytest
 from conftest import rendered
-from textured_support import mpeg4_round_trip
 
 from tracker.config import MeasureConfig, SegmentConfig, TrackerConfig
 from tracker.evaluate import evaluate
 from tracker.measure import HALF_WINDOW_PX, Measurer, _Crossings
 from tracker.pipeline import Pipeline
-from tracker.synthetic import CameraSpec, PartSpec, SceneSpec
+from tracker.synthetic import CameraSpec, PartSpec, SceneSpec, mpeg4_round_trip
 from tracker.undistort import BeltMapper
 
 SPEED = 240.0  # mm/s, the belt's and so the parts'

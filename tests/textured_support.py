@@ -11,14 +11,12 @@ decode. Truth is the rendered instant's, so it is exact through all of it.
 from __future__ import annotations
 
 import functools
-import tempfile
-from pathlib import Path
 
 import cv2
 import numpy as np
 from conftest import rendered
 
-from tracker.synthetic import CameraSpec, PartSpec, SceneSpec
+from tracker.synthetic import CameraSpec, PartSpec, SceneSpec, mpeg4_round_trip
 
 FPS = 30.0
 BELT_LEVEL = 60.0
@@ -84,28 +82,5 @@ def textured_run(contrast: float, compress: bool = True) -> tuple[list[np.ndarra
         truth = dict(frames[r][1], frame=i)
         truths.append(truth)
     if compress:
-        out = mpeg4_round_trip(out)
+        out = mpeg4_round_trip(out, FPS)
     return out, truths, [round(i * 1e9 / FPS) for i in range(len(out))]
-
-
-def mpeg4_round_trip(frames: list[np.ndarray], fps: float = FPS) -> list[np.ndarray]:
-    """The frames through a real lossy codec (MPEG-4 part 2, as the mixed-items video) and back."""
-    h, w = frames[0].shape
-    with tempfile.TemporaryDirectory() as tmp:
-        path = str(Path(tmp) / "belt.avi")
-        writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
-        if not writer.isOpened():
-            raise RuntimeError("this OpenCV cannot encode MPEG-4")
-        for f in frames:
-            writer.write(cv2.cvtColor(f, cv2.COLOR_GRAY2BGR))
-        writer.release()
-        cap = cv2.VideoCapture(path)
-        back = []
-        while True:
-            ok, image = cap.read()
-            if not ok:
-                break
-            back.append(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY))
-    if len(back) != len(frames):
-        raise RuntimeError(f"MPEG-4 round trip: {len(frames)} frames in, {len(back)} out")
-    return back

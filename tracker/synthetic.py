@@ -10,7 +10,9 @@ rays) and the motion blur (samples spread over the exposure).
 from __future__ import annotations
 
 import math
+import tempfile
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -336,3 +338,27 @@ class Renderer:
             # Pixels it covers and its distance from the image border (-1: not in view).
             "visible_px": visible_px, "border_px": border_px,
         }
+
+
+def mpeg4_round_trip(frames: list[np.ndarray], fps: float) -> list[np.ndarray]:
+    """Grey frames through a real lossy codec (MPEG-4 part 2, as the real mixed-items video) and back:
+    the blocks and ringing a compressed camera stream adds to what the renderer draws."""
+    h, w = frames[0].shape
+    with tempfile.TemporaryDirectory() as tmp:
+        path = str(Path(tmp) / "belt.avi")
+        writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
+        if not writer.isOpened():
+            raise RuntimeError("this OpenCV cannot encode MPEG-4")
+        for f in frames:
+            writer.write(cv2.cvtColor(f, cv2.COLOR_GRAY2BGR))
+        writer.release()
+        cap = cv2.VideoCapture(path)
+        back = []
+        while True:
+            ok, image = cap.read()
+            if not ok:
+                break
+            back.append(cv2.cvtColor(image, cv2.COLOR_BGR2GRAY))
+    if len(back) != len(frames):
+        raise RuntimeError(f"MPEG-4 round trip: {len(frames)} frames in, {len(back)} out")
+    return back
