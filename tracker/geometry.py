@@ -68,7 +68,10 @@ def refine_rect(points: np.ndarray, rect: Rect, band: float, end_fraction: float
 
     ``band`` is how far (same units as points) a point may lie from a side to
     belong to it; points near the corners (``end_fraction`` of the side at each
-    end) are left out, since anti-aliasing and blur round the corners.
+    end) are left out, since anti-aliasing and blur round the corners. ``rect``
+    as it is where a side's points cannot say where it lies: fewer than 3, or a
+    line through them turned further than a line within the band along the
+    whole side can be (a few points on a rounded end).
     """
     a = math.radians(rect.angle_deg)
     ca, sa = math.cos(a), math.sin(a)
@@ -93,6 +96,9 @@ def refine_rect(points: np.ndarray, rect: Rect, band: float, end_fraction: float
         # Total least squares: the direction of the 2x2 scatter matrix's largest eigenvector.
         theta = 0.5 * math.atan2(2 * (suv - n * mu * mv), (suu - n * mu * mu) - (svv - n * mv * mv))
         du, dv = math.cos(theta), math.sin(theta)
+        inner = inner_l if i % 2 == 0 else inner_w
+        if abs(dv if i % 2 == 0 else du) > math.sin(math.atan2(band, inner)):
+            return rect
         # Back to the plane's frame.
         x0, y0 = rect.x_mm + mu * ca - mv * sa, rect.y_mm + mu * sa + mv * ca
         lines.append((x0, y0, du * ca - dv * sa, du * sa + dv * ca))
