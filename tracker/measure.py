@@ -57,6 +57,12 @@ _ALIKE_MS = 0.1
 # each side over at least this many windows, is a box's (see _uneven_faces).
 _UNEVEN_RATIO = 0.8
 _UNEVEN_MIN_WINDOWS = 5
+# A coarse belt reference's plane correction drops belt pixels this many robust sigmas off (_plane_corrected).
+_PLANE_TRIM_SIGMAS = 3.0
+# ... and is left out where it would move the level by more than this fraction of the part's contrast.
+_PLANE_MAX_OF_CONTRAST = 0.25
+# Belt pixels (at most, evenly spaced) the plane is fitted to.
+_PLANE_FIT_PX = 1000
 
 
 @dataclass(frozen=True)
@@ -113,12 +119,16 @@ class Measurement:
 
 
 class Measurer:
-    def __init__(self, mapper: BeltMapper, config: MeasureConfig, smoothing_px: float = 0.0) -> None:
+    def __init__(self, mapper: BeltMapper, config: MeasureConfig, smoothing_px: float = 0.0,
+                 coarse_reference: bool = False) -> None:
         """``smoothing_px``: the belt model's smoothing (a Gaussian's sigma, px; 0: none), through which the
-        edges of parts whose contrast the belt's texture disturbs are read (measure.smooth_texture_ratio)."""
+        edges of parts whose contrast the belt's texture disturbs are read (measure.smooth_texture_ratio).
+        ``coarse_reference``: the belt reference is coarse and still learning (the textured model's, at low
+        resolution), so near a part it is corrected by a plane fitted to the belt pixels around it."""
         self.mapper = mapper
         self.config = config
         self._smoothing_px = smoothing_px
+        self._coarse_reference = coarse_reference
         self._width, self._height = mapper.calibration.size
         # Conservative pixel-area pre-filter, so tiny specks are never mapped at all.
         self._min_area_px = 0.5 * config.min_area_mm2 / mapper.max_mm_per_px() ** 2
@@ -450,8 +460,11 @@ class Measurer:
         def levels(image: np.ndarray) -> tuple[float, np.ndarray, float]:
             # The belt's level around the blob, its model scaled by this frame's lighting gain against
             # it there, and the part's own.
-            belt_here = _median_u8(image, belt)
-            return belt_here, belt_here / ref_here * ref, _median_u8(image, inner)
+            belt_here, part_here = _median_u8(image, belt), _median_u8(image, inner)
+            level = belt_here / ref_here * ref
+            if self._coarse_reference:
+                level = _plane_corrected(level, image, belt, _PLANE_MAX_OF_CONTRAST * abs(part_here - belt_here))
+            return belt_here, level, part_here
 
         belt_here, belt_level, part_level = levels(img8)
         blur_px = self.config.edge_blur_px
@@ -727,3 +740,40 @@ def _boundary_crossings(img8: np.ndarray, belt: np.ndarray, inside: np.ndarray, 
     parts[-2] = parts[-2].reshape(-1, 2 * k)
     parts[-1] = parts[-1].reshape(-1, 2 * k)
     return _Crossings(*parts)
+
+
+def _plane_corrected(level: np.ndarray, image: np.ndarray, belt: np.ndarray, most: float) -> np.ndarray:
+    """The belt ``level`` plus a plane fitted to how the ``belt`` pixels of ``image`` differ from it;
+    ``level`` as it is where the plane would move it by more than ``most`` somewhere in the window.
+
+    A coarse reference that is still learning sits a few grey levels off the belt near a part, and
+    unevenly (it starts from line medians); a part's edge is read from the level next to it, so an
+    offset there moves the edge by a fraction of a pixel. Pixels beyond 3 robust sigmas (the knurl's
+    peaks, a piece of the part the mask missed, another part's shadow) are left out: first around the
+    residuals' median, then around each fitted plane."""
+    # A plane needs no more than about a thousand pixels: a large part's window is read on a grid.
+    step = max(1, int(math.sqrt(belt.size / _PLANE_FIT_PX)))
+    ys, xs = np.nonzero(belt[::step, ::step])
+    ys, xs = ys * step, xs * step
+    residual = image[ys, xs].astype(np.float64) - level[ys, xs]
+    design = np.column_stack([np.ones(len(xs)), xs, ys]).astype(np.float64)
+    off = residual - np.median(residual)  # centred: a plane's residuals are, after its fit
+    keep = np.ones(len(xs), dtype=bool)
+    for _ in range(2):
+        keep = np.abs(off) <= _PLANE_TRIM_SIGMAS * (1.4826 * np.median(np.abs(off[keep])) + 1.0)
+        if keep.sum() < 4 * design.shape[1]:
+            return level
+        kept = design[keep]
+        try:
+            coef = np.linalg.solve(kept.T @ kept, kept.T @ residual[keep])
+        except np.linalg.LinAlgError:  # the belt pixels kept lie on one line: no plane through them
+            return level
+        off = residual - design @ coef
+    h, w = level.shape
+    # A plane is largest at a corner. One that far off is the belt's own pattern (a real belt's), not a
+    # reference lagging behind it, and near the part's level it would wreck the edges' coverage.
+    if max(abs(coef[0] + coef[1] * x + coef[2] * y) for x in (0, w - 1) for y in (0, h - 1)) > most:
+        return level
+    across = (coef[0] + coef[1] * np.arange(w, dtype=np.float32))[None, :]
+    down = (coef[2] * np.arange(h, dtype=np.float32))[:, None]
+    return level + across + down

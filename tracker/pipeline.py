@@ -65,7 +65,8 @@ class Pipeline:
             # The faint faces the plain belt model joins to a part are read too (on a textured belt the
             # knurl comes near a face, and min_contrast keeps those windows out).
             measure = dataclasses.replace(measure, min_contrast=float(seg.faint_threshold))
-        self.measurer = Measurer(mapper, measure, _TEXTURE_BLUR_PX if seg.model == "textured" else 0.0)
+        textured = seg.model == "textured"
+        self.measurer = Measurer(mapper, measure, _TEXTURE_BLUR_PX if textured else 0.0, coarse_reference=textured)
         # The belt's own motion is measured where the belt model needs it (textured belts).
         self.motion = BeltMotion(roi) if seg.model == "textured" else None
         self._roi_centre_px = np.array(cv2.boundingRect(roi), dtype=np.float64)
