@@ -61,8 +61,9 @@ _UNEVEN_MIN_WINDOWS = 5
 _PLANE_TRIM_SIGMAS = 3.0
 # ... and is left out where it would move the level by more than this fraction of the part's contrast.
 _PLANE_MAX_OF_CONTRAST = 0.25
-# Belt pixels (at most, evenly spaced) the plane is fitted to.
+# Belt pixels (at most, evenly spaced) the plane is fitted to, and the fewest it is fitted to at all.
 _PLANE_FIT_PX = 1000
+_PLANE_MIN_PX = 12
 
 
 @dataclass(frozen=True)
@@ -754,14 +755,17 @@ def _plane_corrected(level: np.ndarray, image: np.ndarray, belt: np.ndarray, mos
     # A plane needs no more than about a thousand pixels: a large part's window is read on a grid.
     step = max(1, int(math.sqrt(belt.size / _PLANE_FIT_PX)))
     ys, xs = np.nonzero(belt[::step, ::step])
+    if len(xs) < _PLANE_MIN_PX:
+        return level
     ys, xs = ys * step, xs * step
     residual = image[ys, xs].astype(np.float64) - level[ys, xs]
     design = np.column_stack([np.ones(len(xs)), xs, ys]).astype(np.float64)
-    off = residual - np.median(residual)  # centred: a plane's residuals are, after its fit
+    # Centred on their median at first, as a fitted plane's residuals are on zero.
+    off = residual - np.median(residual)
     keep = np.ones(len(xs), dtype=bool)
     for _ in range(2):
         keep = np.abs(off) <= _PLANE_TRIM_SIGMAS * (1.4826 * np.median(np.abs(off[keep])) + 1.0)
-        if keep.sum() < 4 * design.shape[1]:
+        if keep.sum() < _PLANE_MIN_PX:
             return level
         kept = design[keep]
         try:

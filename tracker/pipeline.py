@@ -68,7 +68,7 @@ class Pipeline:
         textured = seg.model == "textured"
         self.measurer = Measurer(mapper, measure, _TEXTURE_BLUR_PX if textured else 0.0, coarse_reference=textured)
         # The belt's own motion is measured where the belt model needs it (textured belts).
-        self.motion = BeltMotion(roi) if seg.model == "textured" else None
+        self.motion = BeltMotion(roi) if textured else None
         self._roi_centre_px = np.array(cv2.boundingRect(roi), dtype=np.float64)
         self._roi_centre_px = self._roi_centre_px[:2] + self._roi_centre_px[2:] / 2
         self._last_t_ns: int | None = None
