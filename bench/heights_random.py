@@ -130,8 +130,8 @@ def auto_row(frames_own: list[tuple[dict, dict]], height_mm: float) -> dict:
 def missed(row: dict) -> list[str]:
     """The bounds a scene's row misses."""
     out = []
-    given = row.get("given_mean_mm", 0.0), row.get("given_p95_mm", 0.0), row.get("given_angle_deg", 0.0)
-    if given[0] > 0.1 or given[1] > 0.3 or given[2] > 0.05:
+    if (row.get("given_mean_mm", 0.0) > 0.1 or row.get("given_p95_mm", 0.0) > 0.3
+            or row.get("given_angle_deg", 0.0) > 0.05):
         out.append("given")
     if row["converged"] is None:
         return [*out, "never converged"]

@@ -764,6 +764,8 @@ def _plane_corrected(level: np.ndarray, image: np.ndarray, belt: np.ndarray, mos
     off = residual - np.median(residual)
     keep = np.ones(len(xs), dtype=bool)
     for _ in range(2):
+        # A robust sigma (1.4826 x the median absolute deviation), and a grey level more: on a plain belt
+        # read to the grey level the deviation can be 0, and nothing off the median would be kept.
         keep = np.abs(off) <= _PLANE_TRIM_SIGMAS * (1.4826 * np.median(np.abs(off[keep])) + 1.0)
         if keep.sum() < _PLANE_MIN_PX:
             return level
