@@ -1,14 +1,14 @@
 """Parts with height on random scenes: how often the issue's bounds hold where nothing was tuned.
 
     .venv/bin/python bench/heights_random.py [--scenes N] [--first K] [--any-height] [--tilt DEG] [--dark]
-                                             [--textured] [--json]
+                                             [--textured] [--height MM] [--json]
 
 Each scene is drawn from its own seed: a camera (480x360 to 640x480, focal length 0.8-1.1 times the
 width, 600-900 mm above the belt, tilted 0, 10 or 20 deg in turn, or with --tilt every one that much,
 turned -40 to 40 deg), one box
 (60-100 x 35-65 mm, its height 0, 5, 10, 20 or 60 mm in turn, or with --any-height drawn from 3-60
-mm, 150-220 grey on a 50-80 grey belt, or with --dark 20-60 grey on a 130-180 belt: its sides, lit
-less than its top, then differ from the belt by more than its top does; with --textured on a belt
+mm, or with --height that, 150-220 grey on a 50-80 grey belt, or with --dark 20-60 grey on a 130-180
+belt: its sides, lit less than its top, then differ from the belt by more than its top does; with --textured on a belt
 with a knurl of 5-15 grey levels moving with the part, 2 levels of sensor noise, through an MPEG-4
 encode and decode, measured with the textured belt model)
 crossing the whole view at 250-400 mm/s while turning, in view at the start or entering it. The
@@ -88,8 +88,10 @@ def poses_of(spec: SceneSpec, images: list, measure: MeasureConfig, segment: Seg
 
 
 def measure_scene(k: int, any_height: bool = False, tilt_deg: float | None = None, dark: bool = False,
-                  textured: bool = False) -> dict:
+                  textured: bool = False, height_mm: float | None = None) -> dict:
     spec = scene(k, any_height, tilt_deg, dark, textured)
+    if height_mm is not None:
+        spec = replace(spec, parts=(replace(spec.parts[0], height_mm=height_mm),))
     renderer = Renderer(spec)
     frames = [renderer.render(i) for i in range(spec.n_frames)]
     truths = [t for _, t in frames]
@@ -155,13 +157,14 @@ def main(argv: list[str] | None = None) -> int:
                         help="each scene's height drawn from 3-60 mm (evenly on a log scale), not 0/5/10/20/60")
     parser.add_argument("--tilt", type=float, help="every camera tilted this much (deg; the issue allows up to 25)")
     parser.add_argument("--dark", action="store_true", help="each part 20-60 grey on a 130-180 grey belt")
+    parser.add_argument("--height", type=float, help="every part this tall (mm; thin boxes: what auto tells from flat)")
     parser.add_argument("--textured", action="store_true",
                         help="on a knurled belt moving with the part, through MPEG-4, with the textured belt model")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     with Pool(2) as pool:
         rows = pool.map(partial(measure_scene, any_height=args.any_height, tilt_deg=args.tilt, dark=args.dark,
-                                 textured=args.textured),
+                                 textured=args.textured, height_mm=args.height),
                         range(args.first, args.first + args.scenes))
     if args.json:
         print(json.dumps(rows, indent=1))

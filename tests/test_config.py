@@ -15,6 +15,7 @@ from tracker.cli import main
     (json.dumps({"track": {"gate_mm": None}}).encode(), "track.gate_mm: expected a finite number"),
     (json.dumps({"track": {"height_unconverged_sigma_mm": 0.2}}).encode(),
      "track.height_unconverged_sigma_mm: expected >= height_converged_sigma_mm (0.3), got 0.2"),
+    (json.dumps({"track": {"flat_check_views": 2}}).encode(), "track.flat_check_views: expected at least 3 views"),
     (json.dumps({"measure": {"model_sigma_px": -0.01}}).encode(), "measure.model_sigma_px: expected >= 0, got -0.01"),
     (json.dumps({"measure": {"smooth_texture_ratio": -1}}).encode(),
      "measure.smooth_texture_ratio: expected >= 0, got -1"),

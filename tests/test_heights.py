@@ -16,6 +16,7 @@ from conftest import BOX_SUPERSAMPLE, rendered, run_pipeline
 
 from tracker.box import SIDE_X, SIDE_Y, TOP, BoxCamera, EdgeWindows, lengths_in_faces
 from tracker.boxfit import BoxFit, SizePrior, _best_shades
+from tracker.calibration import apply_homography
 from tracker.cli import main
 from tracker.config import MeasureConfig, TrackerConfig
 from tracker.evaluate import evaluate, own_height_readings
@@ -129,6 +130,36 @@ def test_a_box_shows_its_top_and_the_sides_that_face_the_camera():
                 assert np.dot(-a, [b[1] - a[1], a[0] - b[0]]) > 0
     polygons, seen = camera.faces(np.array([[0.0, 0.0, 30.0, 80.0, 50.0, 20.0]]))
     assert list(seen) == [TOP] and polygons.shape == (1, 1, 4, 2)
+
+
+@pytest.mark.parametrize("tilt_deg", [0.0, 20.0])
+def test_a_box_s_silhouette_outgrows_its_footprint_as_the_camera_sees_its_sides(tilt_deg):
+    """box.BoxCamera.silhouette_growth against the silhouette projected plainly: the box's 8 corners
+    through the camera into the image, mapped back onto the belt through the calibration's homography,
+    their extent along the footprint's sides. Right under the camera only the top's outline, cast from
+    nearer the camera, outgrows it; off to one side the sides facing the camera widen it more."""
+    spec = CameraSpec(width=480, height=360, focal_px=420.0, tilt_deg=tilt_deg, yaw_deg=10.0, height_mm=800.0)
+    calibration = Renderer(SceneSpec(spec, (), n_frames=1)).calibration
+    camera = BoxCamera(calibration)
+    nadir = camera.nadir_mm
+    for offset, angle_deg in (((0.0, 0.0), 30.0), ((-150.0, 80.0), 30.0), ((-300.0, 80.0), -70.0),
+                              ((200.0, -120.0), 5.0)):
+        rect = Rect(nadir[0] + offset[0], nadir[1] + offset[1], angle_deg, 80.0, 50.0)
+        growth = camera.silhouette_growth(rect)
+        foot = rectangle_corners(rect.x_mm, rect.y_mm, rect.angle_deg, rect.length_mm, rect.width_mm)
+        corners = np.vstack([np.c_[foot, np.zeros(4)], np.c_[foot, np.full(4, -1.0)]])  # 1 mm tall
+        image, _ = cv2.projectPoints(corners, calibration.belt_rvec, calibration.belt_tvec,
+                                     calibration.camera_matrix, None)
+        on_belt = apply_homography(calibration.homography_at_height(0.0), image.reshape(-1, 2))
+        a = math.radians(angle_deg)
+        along = on_belt @ np.array([math.cos(a), math.sin(a)])
+        across = on_belt @ np.array([-math.sin(a), math.cos(a)])
+        expected = (np.ptp(along) - rect.length_mm, np.ptp(across) - rect.width_mm)
+        assert np.allclose(growth, expected, atol=1e-6), (offset, growth, expected)
+        if offset == (0.0, 0.0):  # its top's outline cast on the belt from 799 mm up: larger by 800/799
+            assert np.allclose(growth, (80.0 / 799.0, 50.0 / 799.0), atol=1e-9), growth
+        else:  # the sides add about the far corner's distance off over the camera's height
+            assert max(growth) > 0.15, growth
 
 
 def _dark_box_scene(height_mm: float, tilt_deg: float) -> SceneSpec:

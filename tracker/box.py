@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from tracker.calibration import Calibration
+from tracker.geometry import Rect, rectangle_corners
 from tracker.shadebounds import BRIGHT, ShadeBounds
 
 # Face kinds: the top, the sides facing the part's own x (its ends) and those facing its y.
@@ -106,6 +107,20 @@ class BoxCamera:
 
         params = np.ascontiguousarray(np.atleast_2d(params), dtype=np.float64)
         return box_faces(params, self.rotation, self.translation, self.nadir_mm)
+
+    def silhouette_growth(self, rect: Rect) -> tuple[float, float]:
+        """How much the silhouette of a box whose footprint is ``rect`` (belt frame, mm), cast on the
+        belt from the camera's centre, outgrows the footprint along its length and its width per mm of
+        the box's height (to first order): what a box's sides add to it measured as flat, where the
+        camera sees them fully (sides read dimmer than its top add less)."""
+        foot = rectangle_corners(rect.x_mm, rect.y_mm, rect.angle_deg, rect.length_mm, rect.width_mm)
+        centre = -self.rotation.T @ self.translation  # the camera's, belt frame (Z into the belt: < 0)
+        # The top's corners 1 mm up (Z = -1), along the rays from the centre down to the belt.
+        cast = centre[:2] + (foot - centre[:2]) * (centre[2] / (centre[2] + 1.0))
+        outline = np.vstack([foot, cast])
+        a = np.radians(rect.angle_deg)
+        along, across = outline @ np.array([np.cos(a), np.sin(a)]), outline @ np.array([-np.sin(a), np.cos(a)])
+        return (float(np.ptp(along)) - rect.length_mm, float(np.ptp(across)) - rect.width_mm)
 
 
 def distances_to_outline(points: np.ndarray, outline: np.ndarray) -> np.ndarray:

@@ -117,6 +117,8 @@ class HeightEstimate:
         # The height told until a view leads the vote: 0 for a new part; one voted on again keeps the
         # estimate its views disagreed with (not 0: a jump of the whole height for a frame).
         self._held_mm = 0.0
+        # Flat was voted and the part's sizes then grew as a box's (see _check_flat): no longer a candidate.
+        self.flat_refuted = False
         self._reset()
 
     def _reset(self) -> None:
@@ -145,6 +147,11 @@ class HeightEstimate:
         self._disagreeing = 0
         self._since_refine = 0  # views since the last that told its own shape
         self._converged = False  # see converged
+        # Found flat: its views' flat sizes against how a box's would grow there, as the normal equations
+        # of their fit (see _check_flat; sums, so a part parked under the camera costs no more each view),
+        # and the last view (length, width, their growths).
+        self._flat_fit = _GrowthFit()
+        self._flat_last: np.ndarray | None = None
 
     @property
     def voting(self) -> bool:
@@ -184,7 +191,34 @@ class HeightEstimate:
             if m.shape_info is not None:
                 self._since_refine = 0
                 self._refine(m.shape_info, m.shape_vec)
+        elif self.flat and m.flat_growth is not None and m.pickable and not (m.piece or m.clipped):
+            self._check_flat(m.flat_rect, m.flat_growth)
         self._settle()
+
+    def _check_flat(self, rect: Rect, growth: tuple[float, float]) -> None:
+        """A part found flat: whether its views' flat sizes grow with how much a box's would there
+        (``growth``, per mm of its height), as a box's silhouette does. Fitted over its views as two
+        sizes and one height; where that height is at least track.flat_check_height_mm and
+        track.flat_check_z standard errors from 0 (over track.flat_check_views views or more), flat
+        is refuted and the vote goes on without it."""
+        view = np.array([rect.length_mm, rect.width_mm, *growth])
+        last = self._flat_last
+        # The rectangle's sides in the order of the last view's (a near-square part's swap).
+        if last is not None and (abs(view[0] - last[1]) + abs(view[1] - last[0])
+                                 < abs(view[0] - last[0]) + abs(view[1] - last[1])):
+            view = view[[1, 0, 3, 2]]
+        self._flat_last = view
+        self._flat_fit.add(view)
+        cfg = self._cfg
+        if self._flat_fit.views < cfg.flat_check_views:
+            return
+        height, sigma = self._flat_fit.height(cfg.flat_check_size_sigma_mm, cfg.flat_check_growth_spread)
+        if height >= cfg.flat_check_height_mm and height >= cfg.flat_check_z * sigma:
+            # The vote goes on from the views that found it flat, flat out of it: they were seen where the
+            # sides told most, nearer the view's edge than the part is now.
+            self.flat, self.flat_refuted = False, True
+            self._flat_fit, self._flat_last = _GrowthFit(), None
+            self._tally()
 
     @property
     def leading_mm(self) -> float | None:
@@ -290,6 +324,10 @@ class HeightEstimate:
         self._sizes.append(np.array([(t.rect.length_mm, t.rect.width_mm) for t in trials]))
         # Their variances: the view's own, and no less than the floor.
         self._size_vars.append(np.array([t.size_var_mm2 for t in trials]) + self._cfg.height_vote_size_sigma_mm**2)
+        self._tally()
+
+    def _tally(self) -> None:
+        """The vote's lead over its views so far, and whether it wins (see the module's doc)."""
         scores = self._scores()
         self._lead_tried = int(np.argmin(scores))
         self._lead = self._between(self._lead_tried)
@@ -313,9 +351,12 @@ class HeightEstimate:
         return scores[apart & (heights != height_mm)]
 
     def _scores(self) -> np.ndarray:
-        """Each height's score (lower is better), in units of a chi-square."""
+        """Each height's score (lower is better), in units of a chi-square; flat's none once refuted."""
         sizes, weights, _ = self._sizes_weighed()
-        return self._scored(sizes, weights, np.array(self._excess), self._against())
+        scores = self._scored(sizes, weights, np.array(self._excess), self._against())
+        if self.flat_refuted:
+            scores[np.array(self.heights_mm) == 0] = np.inf
+        return scores
 
     def _told(self) -> np.ndarray:
         """Whether each view's box of each height explains it and tells its size (views, K): a size its view
@@ -475,6 +516,46 @@ class HeightEstimate:
         self._kept = keep
         self._chi2s = self._settled_chi2s + list(np.where(keep, chi2, self._cfg.view_gate_chi2))
         self._info, self._vec = start_info + infos[keep].sum(axis=0), start_vec + vecs[keep].sum(axis=0)
+
+
+class _GrowthFit:
+    """Flat sizes fitted as a box's silhouette grows with its height: each view's length and width as
+    length0 + h * growth and width0 + h * growth (least squares), kept as running sums of the views'
+    differences from the first (so that a part parked under the camera costs no more each view, and
+    sums of squares of sizes 100 mm long do not drown their hundredths)."""
+
+    def __init__(self) -> None:
+        self.views = 0
+        self._first: np.ndarray | None = None
+        self._sums = np.zeros(4)  # of (length, width, growth along the length, along the width)
+        self._products = np.zeros((4, 4))
+
+    def add(self, view: np.ndarray) -> None:
+        """One view: (length, width, how much a box's would grow per mm along each)."""
+        if self._first is None:
+            self._first = view
+        d = view - self._first
+        self._sums += d
+        self._products += np.outer(d, d)
+        self.views += 1
+
+    def height(self, size_sigma_mm: float, min_spread: float) -> tuple[float, float]:
+        """The height (mm) the views tell and its standard error, their scatter about the fit the noise
+        of a size, at least ``size_sigma_mm`` (inf: their growths scatter by less than ``min_spread``
+        (RMS), so they tell none)."""
+        n = self.views
+        if n < 2:
+            return 0.0, math.inf
+        # Each side's (co)variances about its own mean: the two sizes have their own intercepts.
+        centred = self._products - np.outer(self._sums, self._sums) / n
+        sxx = centred[2, 2] + centred[3, 3]
+        sxy = centred[2, 0] + centred[3, 1]
+        syy = centred[0, 0] + centred[1, 1]
+        if sxx < 2 * n * min_spread**2:
+            return 0.0, math.inf
+        height = sxy / sxx
+        noise = max((syy - height * sxy) / max(2 * n - 3, 1), size_sigma_mm**2)
+        return float(height), math.sqrt(noise / sxx)
 
 
 def _weighted_mean(sizes: np.ndarray, weights: np.ndarray) -> np.ndarray:

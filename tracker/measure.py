@@ -95,8 +95,11 @@ class Measurement:
     shape_info: np.ndarray | None = field(default=None, compare=False)
     shape_vec: np.ndarray | None = field(default=None, compare=False)
     shape_at_mm: float | None = None
-    # --part-height auto: the same blob measured as flat (the pose of a part its track finds flat).
+    # --part-height auto: the same blob measured as flat (the pose of a part its track finds flat), and for
+    # a part found flat how much a box's silhouette there would outgrow its footprint per mm of its height
+    # (length, width: BoxCamera.silhouette_growth; whether its track is flat after all, see height.py).
     flat_rect: Rect | None = None
+    flat_growth: tuple[float, float] | None = None
     # Where the camera saw it (world frame, mm: the plain outline's centre; None: the rectangle's). The
     # views a height is estimated from are told apart by it; unlike the poses it stays in the world
     # frame when a moving belt's parts are tracked in the belt's own (see moved).
@@ -188,7 +191,7 @@ class Measurer:
             return None
         box = known = None
         trials: tuple[HeightTrial, ...] = ()
-        flat_rect = None
+        flat_rect = flat_growth = None
         crossed = None
         if cfg.subpixel and not clipped:
             crossed = self._crossings(frame, reference, contour, (x, y, w, h), others)
@@ -222,6 +225,7 @@ class Measurer:
                 if flat is not None:
                     points_px, rect = flat
                     view = rect
+                    flat_growth = self._box_camera.silhouette_growth(_sized(rect, known.size))
             elif edges is not None:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
                 box, trials = self._fit_box(points_norm, self._windows(edges), rect, known)
@@ -236,7 +240,8 @@ class Measurer:
         # Another part within reach of its edges touches it, or nearly: not a pick (contract 4b).
         return Measurement(rect, clipped, (x, y, w, h), centroid_px, len(points_px),
                            pickable=others is None, piece=piece, view_mm=(view.x_mm, view.y_mm),
-                           size_cov_mm2=None if box is None else box.size_cov_mm2, flat_rect=flat_rect, trials=trials,
+                           size_cov_mm2=None if box is None else box.size_cov_mm2, flat_rect=flat_rect,
+                           flat_growth=flat_growth, trials=trials,
                            own_size_mm=None if box is None else box.own_size_mm,
                            shape_info=None if box is None else box.shape_info,
                            shape_vec=None if box is None else box.shape_vec,
@@ -618,6 +623,16 @@ def _uneven_faces(edges: _Edges, points_mm: np.ndarray, rect: Rect) -> bool:
     medians = [float(np.median(contrast[side == s])) for s in range(4)
                if np.count_nonzero(side == s) >= _UNEVEN_MIN_WINDOWS]
     return len(medians) >= 2 and min(medians) < _UNEVEN_RATIO * max(medians)
+
+
+def _sized(rect: Rect, size: SizePrior | None) -> Rect:
+    """``rect`` (its place and turn) of a track's ``size``, its longer side along the rectangle's longer;
+    ``rect`` itself where the track lends none."""
+    if size is None:
+        return rect
+    long, short = size.length_mm, size.width_mm
+    return replace(rect, length_mm=long, width_mm=short) if rect.length_mm >= rect.width_mm else (
+        replace(rect, length_mm=short, width_mm=long))
 
 
 def _size_variances(fit: BoxFit) -> tuple[float, float]:
