@@ -307,19 +307,24 @@ class TrackConfig:
     height_unconverged_sigma_mm: float = 0.5
     # A part its vote found flat is still checked as it crosses the view: a box's silhouette measured as
     # flat outgrows its footprint by its height times how much of its sides the camera sees there
-    # (box.BoxCamera.silhouette_growth), a flat part's does not. Once flat_check_views of its views'
-    # sizes grow so, as a box at least flat_check_height_mm tall would with fully lit sides, and
-    # flat_check_z standard errors from not at all, flat is refuted and the height is voted on again
-    # without it (see HeightEstimate._check_flat). Random scenes' 3 mm boxes, their sides under a
-    # pixel wide, were found flat in 12 of 24 (posed 0.5-1.6 mm off): their sizes grew as 1.2-2.1 mm
-    # boxes' would, 40-90 standard errors from none, after 4-10 views; flat parts' within 0.2 mm and
-    # 6 standard errors (plain, dark and textured belts through MPEG-4, 60 scenes). A view's flat size
-    # counts no surer than flat_check_size_sigma_mm (the few views that first agree claim more), and
-    # views whose growths scatter by less than flat_check_growth_spread (RMS, mm per mm) tell nothing: a
-    # part parked on a stopped belt is seen from one place, and its sizes' slow drift (the texture under
-    # it, the track's own size) fitted as growth read hundreds of mm.
+    # (box.BoxCamera.silhouette_growth), a flat part's does not. Its views flat_check_step_mm or more
+    # apart along its path (neighbouring frames of a slow belt err alike) are fitted as two sizes and
+    # one height times that growth (see HeightEstimate._check_flat); once flat_check_views of them tell
+    # a height of at least flat_check_height_mm, flat_check_z standard errors from none, flat is
+    # refuted and its vote goes on without it. The standard error takes a size's noise as their
+    # scatter about the fit, no less than flat_check_size_sigma_mm (the few views that first agree
+    # claim more); views whose growths scatter by less than flat_check_growth_spread (RMS, mm per mm)
+    # tell nothing: a part parked on a stopped belt is seen from one place, and its sizes' slow drift
+    # (the texture under it, the track's own size the growth is computed for) read hundreds of mm.
+    # Random scenes' 3 mm boxes, their sides under a pixel wide, were found flat in 12 of 24 (posed
+    # 0.5-1.6 mm off): their sizes grew as 1.2-2.1 mm boxes' would (their sides read dimmer than their
+    # top), 40-90 standard errors from none, after 4-10 views; flat parts' within 0.2 mm and 6
+    # standard errors (plain, dark and textured belts through MPEG-4, 60 scenes). The floor, 1 mm,
+    # leaves room below the thin boxes' 1.2 for a camera whose sizes err across the view by a tenth of
+    # a mm (a lens calibrated less well than the renderer's), which would tell 0.3-0.5 mm.
     flat_check_views: int = 5
-    flat_check_height_mm: float = 0.5
+    flat_check_step_mm: float = 5.0
+    flat_check_height_mm: float = 1.0
     flat_check_z: float = 10.0
     flat_check_size_sigma_mm: float = 0.02
     flat_check_growth_spread: float = 0.01

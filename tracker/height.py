@@ -15,7 +15,9 @@ size. The estimate has two stages.
    height). The best height wins once it leads by ``track.height_vote_margin`` every height tried that
    does not bracket the vote's lead (see _rivals; from ``track.height_vote_min_views`` views on), or
    after ``track.height_vote_views`` views. A winner of 0
-   makes the part flat: from then on it is measured as flat, exactly as a flat part always was. A
+   makes the part flat: from then on it is measured as flat, exactly as a flat part always was,
+   unless its sizes grow across the view as a box's silhouette does (``track.flat_check_*``, see
+   _check_flat): then flat is refuted and the vote goes on without it. A
    part's height is rarely one of those tried: between the best height's neighbours (halfway to
    each) every view's sizes are interpolated, and the height where they agree best leads the vote
    (to ``track.height_vote_resolution_mm``), and starts the refinement if its height wins. Meanwhile
@@ -152,6 +154,7 @@ class HeightEstimate:
         # and the last view (length, width, their growths).
         self._flat_fit = _GrowthFit()
         self._flat_last: np.ndarray | None = None
+        self._flat_seen_mm: tuple[float, float] | None = None  # where the last view it counted was seen
 
     @property
     def voting(self) -> bool:
@@ -191,7 +194,9 @@ class HeightEstimate:
             if m.shape_info is not None:
                 self._since_refine = 0
                 self._refine(m.shape_info, m.shape_vec)
-        elif self.flat and m.flat_growth is not None and m.pickable and not (m.piece or m.clipped):
+        elif (self.flat and m.flat_growth is not None and m.pickable and not (m.piece or m.clipped)
+              and vote_due(self._flat_seen_mm, x_mm, y_mm, self._cfg.flat_check_step_mm)):
+            self._flat_seen_mm = (x_mm, y_mm)
             self._check_flat(m.flat_rect, m.flat_growth)
         self._settle()
 
@@ -217,7 +222,7 @@ class HeightEstimate:
             # The vote goes on from the views that found it flat, flat out of it: they were seen where the
             # sides told most, nearer the view's edge than the part is now.
             self.flat, self.flat_refuted = False, True
-            self._flat_fit, self._flat_last = _GrowthFit(), None
+            self._flat_fit, self._flat_last, self._flat_seen_mm = _GrowthFit(), None, None
             self._tally()
 
     @property
@@ -340,7 +345,7 @@ class HeightEstimate:
     def _rivals(self, scores: np.ndarray, height_mm: float) -> np.ndarray:
         """Of the heights tried's ``scores``, those the vote's lead ``height_mm`` has to lead by
         track.height_vote_margin to win: all but the two that bracket it (its neighbours, where it is one
-        of them), and flat's unless flat leads (a part found flat is measured flat for good, while the
+        of them), and flat's unless flat leads (a part found flat is measured flat unless refuted, while the
         refinement moves a box's height within its bracket: a part between two heights tried, 8 mm, fits
         both alike and their scores kept within the margin of each other for 6 views)."""
         heights = np.array(self.heights_mm)
