@@ -73,8 +73,10 @@ class BoxCamera:
     def __init__(self, calibration: Calibration) -> None:
         self.rotation = np.ascontiguousarray(calibration.rotation(), dtype=np.float64)
         self.translation = np.ascontiguousarray(calibration.belt_tvec, dtype=np.float64).reshape(3)
-        # The camera's foot on the belt: a side face is seen from the side of its plane this is on.
-        self.nadir_mm = (-self.rotation.T @ self.translation)[:2]
+        # The camera's centre (belt frame, mm; Z into the belt, so it is < 0), and its foot on the belt: a
+        # side face is seen from the side of its plane the foot is on.
+        self.centre_mm = -self.rotation.T @ self.translation
+        self.nadir_mm = self.centre_mm[:2]
 
     def project(self, world: np.ndarray) -> np.ndarray:
         cam = world @ self.rotation.T + self.translation
@@ -114,7 +116,7 @@ class BoxCamera:
         the box's height (to first order): what a box's sides add to it measured as flat, where the
         camera sees them fully (sides read dimmer than its top add less)."""
         foot = rectangle_corners(rect.x_mm, rect.y_mm, rect.angle_deg, rect.length_mm, rect.width_mm)
-        centre = -self.rotation.T @ self.translation  # the camera's, belt frame (Z into the belt: < 0)
+        centre = self.centre_mm
         # The top's corners 1 mm up (Z = -1), along the rays from the centre down to the belt.
         cast = centre[:2] + (foot - centre[:2]) * (centre[2] / (centre[2] + 1.0))
         outline = np.vstack([foot, cast])

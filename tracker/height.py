@@ -219,10 +219,10 @@ class HeightEstimate:
             return
         height, sigma = self._flat_fit.height(cfg.flat_check_size_sigma_mm, cfg.flat_check_growth_spread)
         if height >= cfg.flat_check_height_mm and height >= cfg.flat_check_z * sigma:
-            # The vote goes on from the views that found it flat, flat out of it: they were seen where the
-            # sides told most, nearer the view's edge than the part is now.
+            # The vote goes on from the views that found it flat, flat out of it (it cannot be found flat
+            # again, so its check is done): they were seen where the sides told most, nearer the view's
+            # edge than the part is now.
             self.flat, self.flat_refuted = False, True
-            self._flat_fit, self._flat_last, self._flat_seen_mm = _GrowthFit(), None, None
             self._tally()
 
     @property
