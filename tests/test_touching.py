@@ -14,8 +14,11 @@ import numpy as np
 import pytest
 from conftest import run_pipeline
 
+from tracker.config import MeasureConfig
+from tracker.measure import Measurer
 from tracker.split import SplitRule, split_blob
 from tracker.synthetic import CameraSpec, PartSpec, SceneSpec
+from tracker.undistort import BeltMapper
 
 V = 450.0  # mm/s along +X
 FPS = 30.0
@@ -238,3 +241,31 @@ def test_parts_near_but_apart_stay_pickable():
         for obj in pose["objects"]:
             assert _nearest(obj, both)[0] < 0.1 and obj["pickable"] is True, (pose["frame"], obj)
     assert checked >= 15
+
+
+def test_a_notch_of_pixels_unlike_the_belt_is_no_place_where_parts_meet():
+    # A part with a dim face (20 levels above the belt: below segment.diff_threshold), its mask notched
+    # 6 px deep where noise dropped some of that face's pixels. A box's silhouette is convex: what lies
+    # in its notch unlike the belt is the part's own, and it is one pickable part. The same notch
+    # holding belt is where two parts meet.
+    rng = np.random.default_rng(3)
+    belt, mapper = 80.0, BeltMapper(CameraSpec().calibration())
+    image = np.full((480, 640), belt)
+    image[150:220, 200:300] += 100  # the top
+    image[150:220, 300:306] += 20  # the dim face on its right
+    mask = np.zeros(image.shape, np.uint8)
+    mask[150:220, 200:306] = 255
+    mask[180:186, 300:306] = 0  # the notch
+    reference = np.full(image.shape, belt, np.float32)
+    measure = Measurer(mapper, MeasureConfig(estimate_height=False, min_contrast=12.0))
+
+    def parts(picture: np.ndarray) -> list:
+        frame = np.clip(picture + rng.normal(0, 1.5, picture.shape), 0, 255).round().astype(np.uint8)
+        return measure(frame, reference, mask)
+
+    (whole,) = parts(image)
+    assert whole.pickable and not whole.piece
+    assert whole.bbox_px == (200, 150, 106, 70)
+    gap = image.copy()
+    gap[180:186, 300:306] = belt
+    assert not any(m.pickable for m in parts(gap)), "a notch holding belt is where parts meet"

@@ -36,7 +36,7 @@ from tracker.geometry import Rect, min_area_rect, rectangle_corners, refine_rect
 from tracker.height import HeightTrial, vote_due
 from tracker.segment.textured import SmoothedView
 from tracker.shadebounds import ShadeBounds, shade_bounds
-from tracker.split import SplitRule, split_blob
+from tracker.split import SplitRule, deepest_notch_px, split_blob
 from tracker.undistort import BeltMapper
 
 # Pixels on each side of a crossing that the coverage sum spans (covers blur up to ~4 px).
@@ -46,6 +46,8 @@ _STEEP_RATIO = 0.5
 # A view's own shape (Measurer._own_shape): its height and size free, nothing lent, every window within
 # the model's errors kept, and what it kept (to compare two such fits over the same windows).
 _OWN = {"free_height": True, "keep_model_errors": True, "keep_residuals": True}
+# A gap between a blob and its hull this far (px) inside the hull is a notch (see Measurer._filled).
+_NOTCH_DEPTH_PX = 2.0
 _ERODE = cv2.getStructuringElement(cv2.MORPH_RECT, (5, 5))
 _ZONE = cv2.getStructuringElement(cv2.MORPH_RECT, (7, 7))
 # Fewer sub-pixel edge points than this: the blob is measured from its pixel staircase.
@@ -161,6 +163,7 @@ class Measurer:
         parts = None  # every blob that may be a part, drawn only when two come near each other
         found = []
         for n, contour in enumerate(contours):
+            contour = self._filled(frame, reference, contour, boxes[n])
             split = split_blob(contour, self._split_rule)
             window = self._window(boxes[n])
             near = len(split.pieces) > 1 or any(k != n and _overlap(window, b) for k, b in enumerate(boxes))
@@ -175,6 +178,43 @@ class Measurer:
         # Deterministic order for the tracker: left to right, top to bottom in the image.
         found.sort(key=lambda m: (m.bbox_px[0], m.bbox_px[1]))
         return found
+
+    def _filled(self, frame: np.ndarray, reference, contour: np.ndarray, bbox) -> np.ndarray:
+        """The blob with its notches that hold the part's own pixels, not belt: a box's silhouette is convex,
+        and a face near the segmentation's threshold loses pixels to noise, which notches the outline as
+        where two parts meet. A notch is a gap between the blob and its convex hull _NOTCH_DEPTH_PX deep or
+        more; it joins the blob where most of its pixels are unlike the belt, by measure.min_contrast or
+        more on the blob's side of the belt's level (where two parts meet it holds belt, only its pixels
+        next to their edges blurred unlike it). The slivers between a straight edge's pixel staircase and
+        its hull stay out: the pixels their edge crosses are unlike the belt too, and joined they would move
+        the edge's windows out (its face read off a pixel the edge still crosses)."""
+        if deepest_notch_px(contour) < _NOTCH_DEPTH_PX:
+            return contour  # convex up to its pixels' staircase: nearly every blob, at the cost of its hull
+        x, y, w, h = bbox
+        blob = np.zeros((h + 2, w + 2), np.uint8)  # a pixel's margin: the hull's outside, for its depth
+        cv2.drawContours(blob, [contour], -1, 255, thickness=cv2.FILLED, offset=(1 - x, 1 - y))
+        hull = np.zeros_like(blob)
+        cv2.fillConvexPoly(hull, cv2.convexHull(contour).reshape(-1, 2) - (x - 1, y - 1), 255)
+        gaps = cv2.bitwise_and(hull, cv2.bitwise_not(blob))
+        deep = cv2.bitwise_and(gaps, cv2.compare(cv2.distanceTransform(hull, cv2.DIST_L2, 3), _NOTCH_DEPTH_PX,
+                                                 cv2.CMP_GE))
+        if not cv2.countNonZero(deep):
+            return contour
+        n, labels = cv2.connectedComponents(gaps, connectivity=8)
+        notches = np.unique(labels[deep > 0])
+        img = np.zeros(blob.shape, np.float32)
+        img[1:-1, 1:-1] = frame[y:y + h, x:x + w]
+        img[1:-1, 1:-1] -= np.asarray(reference[y:y + h, x:x + w], dtype=np.float32)
+        side = 1.0 if cv2.mean(img, mask=blob)[0] >= 0 else -1.0
+        unlike = side * img >= self.config.min_contrast
+        counts = np.bincount(labels.ravel(), minlength=n)
+        like = np.bincount(labels.ravel(), weights=unlike.ravel(), minlength=n)
+        fill = np.zeros(n, dtype=bool)
+        fill[notches] = like[notches] >= 0.5 * counts[notches]
+        fill[0] = False  # the blob and what lies outside its hull
+        joined = cv2.bitwise_or(blob, fill[labels].astype(np.uint8) * 255)
+        found, _ = cv2.findContours(joined, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE, offset=(x - 1, y - 1))
+        return max(found, key=cv2.contourArea)
 
     def _measure(self, frame, reference, contour, parts, piece: bool = False) -> Measurement | None:
         """One part; ``parts``: the mask of every blob (None: no other blob is near); ``piece``: the contour
