@@ -125,29 +125,26 @@ def _boxlike(contour: np.ndarray, rule: SplitRule) -> bool:
 
 def _notches(contour: np.ndarray, rule: SplitRule) -> list[int]:
     """Indices of the contour points deepest in each notch deeper than the rule's minimum."""
-    deepest, depths = _defects(contour)
-    return [int(f) for f, d in zip(deepest, depths, strict=True) if d >= rule.min_notch_px]
+    defects = _defects(contour)
+    if defects is None:  # a self-touching outline: no notches to cut along
+        return []
+    return [int(f) for f, d in zip(*defects, strict=True) if d >= rule.min_notch_px]
 
 
 def deepest_notch_px(contour: np.ndarray) -> float:
     """How far (px) the contour's deepest point lies inside its convex hull (inf: a self-touching outline)."""
-    try:
-        _, depths = _defects(contour, strict=True)
-    except cv2.error:
-        return np.inf
-    return float(depths.max(initial=0.0))
+    defects = _defects(contour)
+    return np.inf if defects is None else float(defects[1].max(initial=0.0))
 
 
-def _defects(contour: np.ndarray, strict: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Each notch's deepest contour point (index) and its depth (px); none for a self-touching outline
-    (``strict``: it raises cv2.error instead)."""
+def _defects(contour: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Each notch's deepest contour point (index) and its depth (px); None for a self-touching outline
+    (OpenCV finds no defects along it)."""
     hull = cv2.convexHull(contour, returnPoints=False)
     try:
         defects = cv2.convexityDefects(contour, np.sort(hull, axis=0))
-    except cv2.error:  # a self-touching outline: no notches to cut along
-        if strict:
-            raise
-        defects = None
+    except cv2.error:
+        return None
     if defects is None or not defects.size:
         return np.zeros(0, dtype=np.int64), np.zeros(0)
     defects = defects.reshape(-1, 4)
