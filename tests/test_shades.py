@@ -4,6 +4,7 @@ they pin the thin side faces whose shade one view trades with its edge."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -57,6 +58,26 @@ def test_what_views_told_fades_so_a_face_turning_towards_a_lamp_is_followed():
         shades.add(_view(0.8, 0.5))
     # Without fading the mean of both (0.65); after twice its memory the newer shade leads.
     assert shades.prior().shades[0] > 0.75
+
+
+def test_opposite_faces_keep_their_own_shades_and_one_not_seen_yet_starts_from_its_opposite():
+    """Under a lamp to one side a part's end faces differ: the one facing 0 deg at 0.85 of the top's
+    level, the one facing 180 deg at 0.5. Each view says which it sees (ViewShades.facing_deg)."""
+    cfg = TrackConfig()
+    shades = ShadeEstimate(cfg)
+    for _ in range(5):
+        shades.add(replace(_view(0.85, 0.6, long_sigma=0.02), facing_deg=(0.0, 90.0)))
+    unseen = shades.lent().facing((180.0, 90.0))
+    # Known through its opposite, no surer than faces opposite are alike.
+    assert unseen.shades[0] == pytest.approx(0.85, abs=0.01) and unseen.sigma[0] >= cfg.opposite_shade_sigma
+    for _ in range(5):
+        shades.add(replace(_view(0.5, 0.6, long_sigma=0.02), facing_deg=(180.0, 90.0)))
+    lent = shades.lent()
+    assert lent.facing((0.0, 90.0)).shades[0] == pytest.approx(0.85, abs=0.03)
+    assert lent.facing((180.0, 90.0)).shades[0] == pytest.approx(0.5, abs=0.03)
+    # The part turns as it crosses: a face is the one facing within 90 deg of where it faced.
+    assert lent.facing((40.0, 130.0)).shades[0] == pytest.approx(0.85, abs=0.03)
+    assert lent.facing((40.0, 130.0)).sigma[0] < cfg.opposite_shade_sigma
 
 
 def test_a_slivers_shade_is_decided_with_the_size_across_views():

@@ -159,3 +159,25 @@ def test_a_thin_boxs_faces_cover_each_pixel_as_their_exact_polygons_do(angle_deg
         inner = (along > 4) & (along < length - 4)  # not the corners, where faces meet
         per_window = np.bincount((along[inner] // 8).astype(int), weights=error[inner])[1:-1] / 8
         assert len(per_window) and np.abs(per_window).max() <= 0.015, (kind, np.abs(per_window).max())
+
+
+@pytest.mark.parametrize("x_mm, brighter", [(-150.0, True), (150.0, False)])
+def test_a_side_lamp_lights_the_face_towards_it_and_darkens_the_one_away(x_mm, brighter):
+    """The camera straight down sees a box's end face on its own side: left of the camera the one
+    facing +x, right of it the one facing -x. A lamp at azimuth 0 lights the first more than its kind's
+    shade and the second less; one at azimuth 90 leaves both end faces as they were."""
+    cam = CameraSpec(width=320, height=240, focal_px=280.0)
+    part = PartSpec(60, 40, 30.0, x_mm, 0.0, 0.0, intensity=180)
+
+    def image(side_light: tuple[float, float]) -> np.ndarray:
+        scene = SceneSpec(cam, (part,), n_frames=1, noise_sigma=0, blur_samples=1, side_light=side_light)
+        return Renderer(scene).render(0)[0].astype(np.float64)
+
+    plain = image((0.0, 0.0))
+    towards_x = image((0.0, 0.25)) - plain
+    towards_y = image((90.0, 0.25)) - plain
+    # Only the side faces change: some pixels do, most of the part's (its top) do not.
+    assert np.count_nonzero(np.abs(towards_x) > 1.0) > 20
+    assert (towards_x.sum() > 0) == brighter
+    # The long faces facing y are seen only edge-on from here; the end faces are lit across.
+    assert np.abs(towards_y).sum() < 0.05 * np.abs(towards_x).sum()

@@ -18,6 +18,7 @@ hull of the 8 corners, against the edge points).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import cv2
@@ -109,6 +110,18 @@ class BoxCamera:
 
         params = np.ascontiguousarray(np.atleast_2d(params), dtype=np.float64)
         return box_faces(params, self.rotation, self.translation, self.nadir_mm)
+
+    def facing_deg(self, params: np.ndarray) -> tuple[float, float]:
+        """Which of a box's side faces (x, y, angle, length, width, ...) face the camera: the directions
+        (belt frame, deg) of the outward normals of the end face and of the long face on the side of the
+        camera's foot, those it sees where it sees any. Under a lamp to one side a face and the one
+        opposite it differ in shade."""
+        x, y, angle = params[:3]
+        a = math.radians(angle)
+        towards = self.nadir_mm - np.array([x, y])
+        along = towards @ np.array([math.cos(a), math.sin(a)])
+        across = towards @ np.array([-math.sin(a), math.cos(a)])
+        return (float(angle) + (0.0 if along >= 0 else 180.0), float(angle) + (90.0 if across >= 0 else -90.0))
 
     def silhouette_growth(self, rect: Rect) -> tuple[float, float]:
         """How much the silhouette of a box whose footprint is ``rect`` (belt frame, mm), cast on the

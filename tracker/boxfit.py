@@ -148,6 +148,10 @@ class ViewShades:
     # see its faces at other widths, decide the two together (tracker/shades.py).
     info: np.ndarray | None = field(default=None, compare=False)
     vec: np.ndarray | None = field(default=None, compare=False)
+    # Which end face and which long face the view saw: the directions of their outward normals (belt
+    # frame, deg; BoxCamera.facing_deg; None: not said). A lamp to one side lights a face and the one
+    # opposite it unalike, and a part crossing the view shows one, then the other (tracker/shades.py).
+    facing_deg: tuple[float, float] | None = None
 
 
 def predicted_sums(camera: BoxCamera, windows: EdgeWindows, params: np.ndarray, shades: np.ndarray | None = None,
@@ -317,6 +321,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
         fit_kept = np.ones(len(windows), dtype=bool) if isinstance(keep, slice) else keep
         if shade_prior is None and not np.array_equal(near_box, fit_kept):
             shades = replace(shades, outside=told_over(keep).outside)
+        shades = replace(shades, facing_deg=camera.facing_deg(params))
     inlying = None
     if keep_residuals:
         inlying = np.ones(len(every), dtype=bool) if isinstance(keep, slice) else keep
@@ -405,7 +410,8 @@ def _swapped(view: ViewShades) -> ViewShades:
     order = [1, 0, 3, 2]
     return ViewShades(view.shades[::-1], view.variances[::-1], view.outside[::-1],
                       None if view.info is None else view.info[np.ix_(order, order)],
-                      None if view.vec is None else view.vec[order])
+                      None if view.vec is None else view.vec[order],
+                      None if view.facing_deg is None else view.facing_deg[::-1])
 
 
 def marginalised(normal: np.ndarray, grad: np.ndarray, keep: list[int],

@@ -241,11 +241,14 @@ class TrackConfig:
     # the top's contrast; weighed as the size is, see measure.sum_sigma_px); a view counts no surer
     # than shade_view_min_sigma, and not at all where it tells a shade worse than
     # shade_view_max_sigma (a sliver too narrow to show it); what views told fades over
-    # shade_memory_views views (a face turning towards a lamp changes shade).
+    # shade_memory_views views (a face turning towards a lamp changes shade). Each side face has its
+    # own shade, within opposite_shade_sigma of the face opposite it (a lamp to one side lights them
+    # unalike; a face no view has shown yet starts from the other's).
     known_shade_sigma: float = 0.03
     shade_view_min_sigma: float = 0.05
     shade_view_max_sigma: float = 0.15
     shade_memory_views: float = 100.0
+    opposite_shade_sigma: float = 0.1
     # --part-height auto (tracker/height.py). The vote: views this far apart along the part's path
     # (mm) fitted at each height of measure.height_starts_mm, their sizes expected to agree as well as
     # each view decides them, and no better than height_vote_size_sigma_mm (1 sigma); no view adds

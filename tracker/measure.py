@@ -23,7 +23,6 @@ from tracker.boxfit import (
     CONVERGED_STEPS,
     PRECISE_STEPS,
     BoxFit,
-    ShadePrior,
     SizePrior,
     ViewShades,
     comparable_ms_px2,
@@ -36,6 +35,7 @@ from tracker.geometry import Rect, min_area_rect, rectangle_corners, refine_rect
 from tracker.height import HeightTrial, vote_due
 from tracker.segment.textured import SmoothedView
 from tracker.shadebounds import ShadeBounds, shade_bounds
+from tracker.shades import FaceShades
 from tracker.split import SplitRule, deepest_notch_px, split_blob
 from tracker.undistort import BeltMapper
 
@@ -354,6 +354,10 @@ class Measurer:
         # into its neighbours, and views misread it.
         sharp = windows.blur_px == 0
         tell_shades = cfg.learn_shades and sharp
+        # The track's shades of the side faces this view shows (those on the camera's side of where the
+        # part is expected).
+        shades = (None if known is None or known.shades is None else
+                  known.shades.facing(self._box_camera.facing_deg(np.array([known.x_mm, known.y_mm, rect.angle_deg]))))
 
         def fit(height_mm: float, start: Rect | None = None, **kwargs) -> BoxFit | None:
             # From ``start``, or the outline measured on the plane of its top (where the measurement maps it
@@ -371,7 +375,7 @@ class Measurer:
             # Its height given: its size and side shades lent; what the view tells of the shades goes
             # back to the track (from a sharp image only, as below).
             return fit(cfg.part_height_mm, size_prior=self._size_of(known),
-                       shade_prior=None if known is None else known.shades,
+                       shade_prior=shades,
                        tell_shades=tell_shades and cfg.part_height_mm > 0), ()
         if known is not None and known.height_mm is not None:
             # Its height voted on, being refined. Its pose: a box of that height, its size and side shades
@@ -379,7 +383,7 @@ class Measurer:
             # trades with size); what the view tells of the shades goes back to the track, from a sharp
             # image only (a blur spreads a sliver's shade into its neighbours, and views misread it:
             # 0.2-0.5 against a rendered 0.5-0.7, with the camera's or the textured model's blur).
-            pose = fit(known.height_mm, size_prior=self._size_of(known), shade_prior=known.shades,
+            pose = fit(known.height_mm, size_prior=self._size_of(known), shade_prior=shades,
                        tell_shades=tell_shades)
             return self._own_shape(pose, fit, known.refine, known.height_mm, sharp), ()
         # Voted on, or new: at each height of height_starts_mm when the view votes, its pose at the
@@ -390,7 +394,7 @@ class Measurer:
             # and what the view tells of the shape, kept until the vote decides (tracker/height.py).
             if lead in (None, 0.0):
                 return None, ()
-            pose = fit(lead, shade_prior=known.shades, tell_shades=tell_shades)
+            pose = fit(lead, shade_prior=shades, tell_shades=tell_shades)
             return self._own_shape(pose, fit, known.refine, lead, sharp), ()
         self._votes_left -= 1
         boxes, trials = self._trials(fit, rect, windows, cfg.height_starts_mm)
@@ -596,7 +600,7 @@ class KnownPart:
     leading_mm: float | None = None
     # Its height given, refined, or leading its vote: the side shades its views have told at that height
     # (tracker/shades.py; None: none yet).
-    shades: ShadePrior | None = None
+    shades: FaceShades | None = None
 
     def votes_at(self, x_mm: float, y_mm: float) -> bool:
         """Whether a view of it seen at (x, y) (world frame) votes (as HeightEstimate.wants_vote judges it)."""

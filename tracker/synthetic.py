@@ -124,6 +124,10 @@ class SceneSpec:
     belt_velocity_mm_s: tuple[float, float] = (0.0, 0.0)
     # Fixed things above the belt (a bracket, a sensor): drawn over the parts, never in the truth.
     occluders: tuple[PartSpec, ...] = ()
+    # A lamp to one side (azimuth deg on the belt, strength): each side face of a box is lit by
+    # 1 + strength * cos(its outward normal's azimuth - the lamp's) times its kind's shade, so that a
+    # face and the one opposite differ (0: every face of a kind alike, as under a lamp overhead).
+    side_light: tuple[float, float] = (0.0, 0.0)
 
     def t_ns(self, index: int) -> int:
         """Capture time of frame ``index``: the middle of its exposure."""
@@ -277,6 +281,30 @@ class Renderer:
                 cover[face - 1, er, ec] = (sub == face).mean(axis=1)
         return cover
 
+    def _paint(self, part: PartSpec, poses: list, roi) -> tuple[np.ndarray, np.ndarray]:
+        """A part's light over the ROI (its faces' coverage times their levels) and its coverage, each
+        the mean over the exposure's sample ``poses``."""
+        paint, total = 0.0, 0.0
+        for pose in poses:
+            cover = self._coverage(part, pose, roi)
+            shades = (1.0, *(kind * self._lamp(part, pose, axis) for axis, kind in enumerate(_SIDE_SHADE)))
+            paint = paint + sum(cover[i] * (part.intensity * shades[i]) for i in range(3))
+            total = total + cover.sum(axis=0)
+        return paint / len(poses), total / len(poses)
+
+    def _lamp(self, part: PartSpec, pose: tuple[float, float, float], axis: int) -> float:
+        """How the side lamp lights the face of ``part`` (at ``pose``) facing its x (``axis`` 0) or y (1)
+        that the camera sees (on the camera's side of the part)."""
+        azimuth_deg, strength = self.scene.side_light
+        if not strength or part.shape != "box":
+            return 1.0
+        x, y, angle = pose
+        normal = math.radians(angle + 90.0 * axis)
+        towards = (self._centre[0] - x) * math.cos(normal) + (self._centre[1] - y) * math.sin(normal)
+        if towards < 0:
+            normal += math.pi
+        return 1.0 + strength * math.cos(normal - math.radians(azimuth_deg))
+
     # --- frames -----------------------------------------------------------------------------
     def _sample_times(self, index: int) -> np.ndarray:
         sc = self.scene
@@ -304,10 +332,7 @@ class Renderer:
             border_px = -1
             if roi is not None:
                 r0, r1, c0, c1 = roi
-                cover = sum(self._coverage(part, p, roi) for p in poses) / len(poses)
-                total = cover.sum(axis=0)
-                shades = (part.intensity, part.intensity * _SIDE_SHADE[0], part.intensity * _SIDE_SHADE[1])
-                paint = sum(cover[i] * shades[i] for i in range(3))
+                paint, total = self._paint(part, poses, roi)
                 image[r0:r1, c0:c1] = image[r0:r1, c0:c1] * (1 - total) + paint
                 rows, cols = np.nonzero(total > 0)
                 visible_px = int(rows.size)

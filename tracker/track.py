@@ -206,14 +206,14 @@ class Track:
         sigma = np.sqrt(np.maximum(np.diag(self.kf.P)[[LENGTH, WIDTH]], cfg.known_size_sigma_mm**2))
         size = SizePrior(float(x[LENGTH]), float(x[WIDTH]), *map(float, sigma))
         if self.height is None:
-            shades = None if self.shades is None else self.shades.prior()
+            shades = None if self.shades is None else self.shades.lent()
             return KnownPart(float(x[X]), float(x[Y]), size, shades=shades)
         if self.height.flat:
             return KnownPart(float(x[X]), float(x[Y]), size, flat=True)
         if self.height.voting:
             return KnownPart(float(x[X]), float(x[Y]), size, last_vote_mm=self.height.last_vote_mm,
                              vote_step_mm=cfg.height_vote_step_mm, leading_mm=self.height.leading_mm,
-                             shades=None if self.shades is None else self.shades.prior())
+                             shades=None if self.shades is None else self.shades.lent())
         # Being refined: the size and height as the track's views tell them together.
         (length, width, _), cov = self.height.shape()
         sigma = np.sqrt(np.maximum(np.diag(cov)[:2], cfg.known_size_sigma_mm**2))
@@ -222,7 +222,7 @@ class Track:
             sigma = sigma[::-1]
         size = SizePrior(float(length), float(width), float(sigma[0]), float(sigma[1]))
         return KnownPart(float(x[X]), float(x[Y]), size, self.height.height_mm, refine=self.height.wants_refine,
-                         shades=None if self.shades is None else self.shades.prior())
+                         shades=None if self.shades is None else self.shades.lent())
 
     def _normalise(self) -> None:
         """Keep the angle in (-90, 90] and the length the longer side (180 deg symmetry)."""
