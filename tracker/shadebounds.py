@@ -38,7 +38,9 @@ class ShadeBounds:
 
 # A part brighter than the belt: kept from nearly the belt's level (a window read against a side face
 # as dark as the belt has no contrast to read; the measurement refuses those) to half again the top's
-# contrast; told, and possible, below the top's.
+# contrast; told, and possible, below the top's. A floor of 0.01 (tried for a side a lamp leaves as
+# dark as the belt, which it did place) let the fits of tall parts wander into sides they do not have:
+# under a side lamp 50 -> 37 of 60 random scenes met every bound, some 8 mm off with the height given.
 BRIGHT = ShadeBounds(0.1, 1.5, (0.1, 1.0), (0.1, 1.0), 0.5)
 
 
