@@ -108,11 +108,6 @@ class ShadeEstimate:
         sigma[known] = np.maximum(np.sqrt(np.maximum(np.diag(cov)[2:], 0.0)), self._cfg.known_shade_sigma)
         return FaceShades(tuple(map(float, shades)), tuple(map(float, sigma)), self._reference_deg)
 
-    def prior(self, facing_deg: tuple[float, float] | None = None) -> ShadePrior | None:
-        """The shades lent a fit whose end and long faces face ``facing_deg`` (see FaceShades.facing)."""
-        lent = self.lent()
-        return None if lent is None else lent.facing(facing_deg)
-
 
 def _slots(facing_deg: tuple[float, float] | None, reference_deg: tuple[float, float] | None) -> tuple[int, int]:
     """Which of each pair (end faces, long faces) faces ``facing_deg``: 0 the one facing within 90 deg of

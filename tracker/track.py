@@ -18,7 +18,7 @@ from tracker.height import HeightEstimate
 from tracker.kalman import ANGLE, LENGTH, VX, VY, WIDTH, X, Y, make_filter, set_interval
 from tracker.measure import KnownPart, Measurement
 from tracker.poses import TrackedObject
-from tracker.shades import ShadeEstimate
+from tracker.shades import FaceShades, ShadeEstimate
 
 
 class Track:
@@ -222,14 +222,13 @@ class Track:
         sigma = np.sqrt(np.maximum(np.diag(self.kf.P)[[LENGTH, WIDTH]], cfg.known_size_sigma_mm**2))
         size = SizePrior(float(x[LENGTH]), float(x[WIDTH]), *map(float, sigma))
         if self.height is None:
-            shades = None if self.shades is None else self.shades.lent()
-            return KnownPart(float(x[X]), float(x[Y]), size, shades=shades)
+            return KnownPart(float(x[X]), float(x[Y]), size, shades=self._lent_shades())
         if self.height.flat:
             return KnownPart(float(x[X]), float(x[Y]), size, flat=True)
         if self.height.voting:
             return KnownPart(float(x[X]), float(x[Y]), size, last_vote_mm=self.height.last_vote_mm,
                              vote_step_mm=cfg.height_vote_step_mm, leading_mm=self.height.leading_mm,
-                             shades=None if self.shades is None else self.shades.lent())
+                             shades=self._lent_shades())
         # Being refined: the size and height as the track's views tell them together.
         (length, width, _), cov = self.height.shape()
         sigma = np.sqrt(np.maximum(np.diag(cov)[:2], cfg.known_size_sigma_mm**2))
@@ -238,7 +237,10 @@ class Track:
             sigma = sigma[::-1]
         size = SizePrior(float(length), float(width), float(sigma[0]), float(sigma[1]))
         return KnownPart(float(x[X]), float(x[Y]), size, self.height.height_mm, refine=self.height.wants_refine,
-                         shades=None if self.shades is None else self.shades.lent())
+                         shades=self._lent_shades())
+
+    def _lent_shades(self) -> FaceShades | None:
+        return None if self.shades is None else self.shades.lent()
 
     def _normalise(self) -> None:
         """Keep the angle in (-90, 90] and the length the longer side (180 deg symmetry)."""
