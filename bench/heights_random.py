@@ -1,7 +1,8 @@
 """Parts with height on random scenes: how often the issue's bounds hold where nothing was tuned.
 
     .venv/bin/python bench/heights_random.py [--scenes N] [--first K] [--any-height] [--tilt DEG] [--dark]
-                                             [--textured] [--side-light] [--height MM] [--json]
+                                             [--textured] [--side-light] [--shadow] [--height MM]
+                                             [--json]
 
 Each scene is drawn from its own seed: a camera (480x360 to 640x480, focal length 0.8-1.1 times the
 width, 600-900 mm above the belt, tilted 0, 10 or 20 deg in turn, or with --tilt every one that much,
@@ -12,7 +13,8 @@ belt: its sides, lit less than its top, then differ from the belt by more than i
 with a knurl of 5-15 grey levels moving with the part, 2 levels of sensor noise, through an MPEG-4
 encode and decode, measured with the textured belt model; with --side-light under a lamp to one side,
 its azimuth from a seed of its own, that lights each side face 0.75-1.25 times its kind's shade: a face
-and the one opposite differ)
+and the one opposite differ; with --shadow that lamp also casts the part's shadow on the belt, from
+45-80 deg above it, taking 30-60 % of the belt's light there)
 crossing the whole view at 250-400 mm/s while turning, in view at the start or entering it. The
 bounds (issue 10): with the height given, centroid mean <= 0.1 mm, p95 <= 0.3 mm and angle mean <= 0.05
 deg; with auto, converged within the first third of the crossing, and from then on the height within 0.5
@@ -44,16 +46,20 @@ HEIGHTS_MM = (0.0, 5.0, 10.0, 20.0, 60.0)
 TILTS_DEG = (0.0, 10.0, 20.0)
 # --side-light: how much the lamp lights a side face facing it more (and the one opposite less).
 SIDE_LIGHT_STRENGTH = 0.25
+# --shadow: how high that lamp stands above the belt (deg) and how much light the shadow takes.
+SHADOW_ELEVATION_DEG = (45.0, 80.0)
+SHADOW_DEPTH = (0.3, 0.6)
 
 
 def scene(k: int, any_height: bool = False, tilt_deg: float | None = None, dark: bool = False,
-          textured: bool = False, side_light: bool = False) -> SceneSpec:
+          textured: bool = False, side_light: bool = False, shadow: bool = False) -> SceneSpec:
     """The k-th random scene (its tilt cycles fastest, then its height; with ``any_height`` its height is
     drawn from 3-60 mm, evenly on a log scale, from a seed of its own; ``tilt_deg``: every camera's tilt,
     the rest of the scene as it is; ``dark``: the part dark on a bright belt, their levels from a seed of
     their own, the rest as it is; ``textured``: a knurl moving with the part, its depth from a seed of
     its own, and more sensor noise; ``side_light``: a lamp to one side, its azimuth from a seed of its
-    own)."""
+    own; ``shadow``: that lamp, also casting the part's shadow on the belt, its elevation and the
+    shadow's depth from a seed of their own)."""
     rng = np.random.default_rng(1000 + k)
     width, height = [(480, 360), (560, 420), (640, 480)][rng.integers(3)]
     focal = float(rng.uniform(0.8, 1.1) * width)
@@ -82,8 +88,12 @@ def scene(k: int, any_height: bool = False, tilt_deg: float | None = None, dark:
     if textured:
         belt = dict(belt_texture=float(np.random.default_rng(8000 + k).uniform(5, 15)), belt_texture_period_mm=6.0,
                     belt_velocity_mm_s=(speed, vy), noise_sigma=2.0)
-    if side_light:
+    if side_light or shadow:
         belt["side_light"] = (float(np.random.default_rng(9000 + k).uniform(0, 360)), SIDE_LIGHT_STRENGTH)
+    if shadow:
+        lamp = np.random.default_rng(10000 + k)
+        belt["cast_shadow"] = (belt["side_light"][0], float(lamp.uniform(*SHADOW_ELEVATION_DEG)),
+                               float(lamp.uniform(*SHADOW_DEPTH)))
     return SceneSpec(cam, (part,), fps=fps, n_frames=int((2 * half_view + length) / speed * fps) + 4,
                      supersample=8, blur_samples=3, belt_level=belt_level, seed=k, **belt)
 
@@ -95,8 +105,9 @@ def poses_of(spec: SceneSpec, images: list, measure: MeasureConfig, segment: Seg
 
 
 def measure_scene(k: int, any_height: bool = False, tilt_deg: float | None = None, dark: bool = False,
-                  textured: bool = False, height_mm: float | None = None, side_light: bool = False) -> dict:
-    spec = scene(k, any_height, tilt_deg, dark, textured, side_light)
+                  textured: bool = False, height_mm: float | None = None, side_light: bool = False,
+                  shadow: bool = False) -> dict:
+    spec = scene(k, any_height, tilt_deg, dark, textured, side_light, shadow)
     if height_mm is not None:
         spec = replace(spec, parts=(replace(spec.parts[0], height_mm=height_mm),))
     renderer = Renderer(spec)
@@ -169,11 +180,15 @@ def main(argv: list[str] | None = None) -> int:
                         help="on a knurled belt moving with the part, through MPEG-4, with the textured belt model")
     parser.add_argument("--side-light", action="store_true",
                         help="under a lamp to one side: a side face and the one opposite differ in shade")
+    parser.add_argument("--shadow", action="store_true",
+                        help="that lamp (--side-light implied) 45-80 deg above the belt, casting the part's "
+                             "shadow, 30-60 %% deep")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     with Pool(2) as pool:
         rows = pool.map(partial(measure_scene, any_height=args.any_height, tilt_deg=args.tilt, dark=args.dark,
-                                 textured=args.textured, height_mm=args.height, side_light=args.side_light),
+                                 textured=args.textured, height_mm=args.height, side_light=args.side_light,
+                                 shadow=args.shadow),
                         range(args.first, args.first + args.scenes))
     if args.json:
         print(json.dumps(rows, indent=1))

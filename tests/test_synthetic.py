@@ -181,3 +181,34 @@ def test_a_side_lamp_lights_the_face_towards_it_and_darkens_the_one_away(x_mm, b
     assert (towards_x.sum() > 0) == brighter
     # The long faces facing y are seen only edge-on from here; the end faces are lit across.
     assert np.abs(towards_y).sum() < 0.05 * np.abs(towards_x).sum()
+
+
+def test_a_lamp_casts_a_boxs_shadow_away_from_it_as_long_as_its_height_over_tan_elevation():
+    """A lamp at azimuth 0 (towards +x), 45 deg above the belt, casts a 20 mm box's shadow 20 mm long on
+    the belt beyond its -x end, as deep as told there; the belt on its +x side and past the shadow's
+    end stays as it was, and a flat part casts none that shows."""
+    cam = CameraSpec(width=320, height=240, focal_px=280.0)
+    depth = 0.4
+
+    def image(height_mm: float, shadow: tuple[float, float, float]) -> np.ndarray:
+        part = PartSpec(60, 40, height_mm, 0.0, 0.0, 0.0, intensity=180)
+        scene = SceneSpec(cam, (part,), n_frames=1, noise_sigma=0, blur_samples=1, belt_level=100.0,
+                          cast_shadow=shadow, shadow_softness_mm=1.0)
+        return Renderer(scene).render(0)[0].astype(np.float64)
+
+    calib = CameraSpec.calibration(cam)
+
+    def at(x_mm: float, y_mm: float) -> tuple[int, int]:
+        u, v = cv2.projectPoints(np.array([[x_mm, y_mm, 0.0]]), calib.belt_rvec, calib.belt_tvec,
+                                 calib.camera_matrix, calib.dist_coeffs)[0].reshape(2)
+        return int(round(v)), int(round(u))
+
+    lamp = (0.0, 45.0, depth)
+    plain, shaded = image(20.0, (0.0, 90.0, 0.0)), image(20.0, lamp)
+    for x_mm in (-33.0, -40.0, -47.0):  # 3-17 mm beyond the -x end: in the shadow
+        ratio = shaded[at(x_mm, 0.0)] / plain[at(x_mm, 0.0)]
+        assert abs(ratio - (1 - depth)) < 0.02, (x_mm, ratio)
+    for x_mm, y_mm in ((-53.0, 0.0), (36.0, 0.0), (-40.0, 26.0)):  # past its end, the lit side, beside it
+        assert abs(shaded[at(x_mm, y_mm)] - plain[at(x_mm, y_mm)]) <= 1.0, (x_mm, y_mm)
+    flat_plain, flat_shaded = image(0.0, (0.0, 90.0, 0.0)), image(0.0, lamp)
+    assert np.abs(flat_shaded - flat_plain).max() <= 1.0

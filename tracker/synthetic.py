@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from tracker.calibration import Calibration, homography_from_pose
+from tracker.castshadow import polygon_cover, shadow_polygon
 from tracker.geometry import rectangle_corners, wrap_angle_deg
 from tracker.raycast import edge_pixels, interpolate, pixel_rays, subpixel_pattern
 
@@ -128,6 +129,17 @@ class SceneSpec:
     # 1 + strength * cos(its outward normal's azimuth - the lamp's) times its kind's shade, so that a
     # face and the one opposite differ (0: every face of a kind alike, as under a lamp overhead).
     side_light: tuple[float, float] = (0.0, 0.0)
+    # A lamp that casts each part's shadow on the belt (tracker/castshadow.py): (azimuth deg, elevation
+    # deg above the belt, depth: the fraction of the belt's light the shadow takes; 0: none), its edge
+    # a penumbra shadow_softness_mm wide. Parts are drawn over every shadow, theirs and the others'.
+    cast_shadow: tuple[float, float, float] = (0.0, 90.0, 0.0)
+    shadow_softness_mm: float = 1.5
+
+    def __post_init__(self) -> None:
+        _, elevation_deg, depth = self.cast_shadow
+        if not 0 < elevation_deg <= 90 or not 0 <= depth <= 1:
+            raise ValueError(f"cast_shadow: expected an elevation in (0, 90] deg and a depth in [0, 1], "
+                             f"got {self.cast_shadow}")
 
     def t_ns(self, index: int) -> int:
         """Capture time of frame ``index``: the middle of its exposure."""
@@ -305,6 +317,28 @@ class Renderer:
             normal += math.pi
         return 1.0 + strength * math.cos(normal - math.radians(azimuth_deg))
 
+    def _shadow(self, times: np.ndarray) -> np.ndarray:
+        """How deep in a shadow each pixel's belt lies (0-1; the deepest of the parts' and occluders',
+        each the mean over the exposure's ``times``). A cylinder's or a bag's is its bounding box's."""
+        sc = self.scene
+        azimuth_deg, elevation_deg, _ = sc.cast_shadow
+        out = np.zeros(self._belt_xy.shape[:2], dtype=np.float32)
+        for part in (*sc.parts, *sc.occluders):
+            top_mm = part.z_mm + (part.width_mm if part.shape == "cylinder" else part.height_mm)
+            polygons = [shadow_polygon(part.length_mm, part.width_mm, part.z_mm, top_mm, part.pose(float(t)),
+                                       azimuth_deg, elevation_deg) for t in times]
+            # Only the pixels whose belt lies near the shadows' bounds: the whole frame costs 4x a render.
+            reach = np.vstack(polygons)
+            low, high = reach.min(axis=0) - sc.shadow_softness_mm, reach.max(axis=0) + sc.shadow_softness_mm
+            near = np.all((self._belt_xy >= low) & (self._belt_xy <= high), axis=-1)
+            if not near.any():
+                continue
+            rows, cols = np.nonzero(near.any(axis=1))[0], np.nonzero(near.any(axis=0))[0]
+            window = np.s_[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+            cover = sum(polygon_cover(self._belt_xy[window], p, sc.shadow_softness_mm) for p in polygons)
+            out[window] = np.maximum(out[window], cover / len(times))
+        return out
+
     # --- frames -----------------------------------------------------------------------------
     def _sample_times(self, index: int) -> np.ndarray:
         sc = self.scene
@@ -320,6 +354,8 @@ class Renderer:
         times = self._sample_times(index)
         if sc.belt_texture:
             image += self._texture(times)
+        if sc.cast_shadow[2]:
+            image *= 1.0 - sc.cast_shadow[2] * self._shadow(times)
         truth: list[dict | None] = [None] * len(sc.parts)
         h, w = image.shape
         # Painted from the belt up: a part lying on another one hides it; occluders hide everything.
