@@ -36,6 +36,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/heights_random.py --textured --scenes 30
 	$(BIN)/python bench/heights_random.py --height 3 --scenes 24
 	$(BIN)/python bench/heights_random.py --side-light --scenes 60
+	$(BIN)/python bench/heights_random.py --shadow --scenes 60
 	$(BIN)/python bench/issue_scenes.py
 	$(BIN)/python bench/view_heights.py
 

@@ -14,7 +14,7 @@ with a knurl of 5-15 grey levels moving with the part, 2 levels of sensor noise,
 encode and decode, measured with the textured belt model; with --side-light under a lamp to one side,
 its azimuth from a seed of its own, that lights each side face 0.75-1.25 times its kind's shade: a face
 and the one opposite differ; with --shadow that lamp also casts the part's shadow on the belt, from
-45-80 deg above it, taking 30-60 % of the belt's light there)
+45-80 deg above it, 2-8 deg across, taking 30-60 % of the belt's light there)
 crossing the whole view at 250-400 mm/s while turning, in view at the start or entering it. The
 bounds (issue 10): with the height given, centroid mean <= 0.1 mm, p95 <= 0.3 mm and angle mean <= 0.05
 deg; with auto, converged within the first third of the crossing, and from then on the height within 0.5
@@ -49,6 +49,8 @@ SIDE_LIGHT_STRENGTH = 0.25
 # --shadow: how high that lamp stands above the belt (deg) and how much light the shadow takes.
 SHADOW_ELEVATION_DEG = (45.0, 80.0)
 SHADOW_DEPTH = (0.3, 0.6)
+# ... and how large it looks from the belt (deg across: a spot to a panel): its shadows' penumbra.
+LAMP_SIZE_DEG = (2.0, 8.0)
 
 
 def scene(k: int, any_height: bool = False, tilt_deg: float | None = None, dark: bool = False,
@@ -94,6 +96,7 @@ def scene(k: int, any_height: bool = False, tilt_deg: float | None = None, dark:
         lamp = np.random.default_rng(10000 + k)
         belt["cast_shadow"] = (belt["side_light"][0], float(lamp.uniform(*SHADOW_ELEVATION_DEG)),
                                float(lamp.uniform(*SHADOW_DEPTH)))
+        belt["lamp_size_deg"] = float(lamp.uniform(*LAMP_SIZE_DEG))
     return SceneSpec(cam, (part,), fps=fps, n_frames=int((2 * half_view + length) / speed * fps) + 4,
                      supersample=8, blur_samples=3, belt_level=belt_level, seed=k, **belt)
 
@@ -181,8 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--side-light", action="store_true",
                         help="under a lamp to one side: a side face and the one opposite differ in shade")
     parser.add_argument("--shadow", action="store_true",
-                        help="that lamp (--side-light implied) 45-80 deg above the belt, casting the part's "
-                             "shadow, 30-60 %% deep")
+                        help="that lamp (--side-light implied) 45-80 deg above the belt and 2-8 deg across, "
+                             "casting the part's shadow, 30-60 %% deep")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     with Pool(2) as pool:

@@ -185,30 +185,32 @@ def test_a_side_lamp_lights_the_face_towards_it_and_darkens_the_one_away(x_mm, b
 
 def test_a_lamp_casts_a_boxs_shadow_away_from_it_as_long_as_its_height_over_tan_elevation():
     """A lamp at azimuth 0 (towards +x), 45 deg above the belt, casts a 20 mm box's shadow 20 mm long on
-    the belt beyond its -x end, as deep as told there; the belt on its +x side and past the shadow's
-    end stays as it was, and a flat part casts none that shows."""
+    the belt beyond its -x end, as deep as told there, its far end soft (the lamp is 6 deg across: a
+    penumbra about 3 mm wide there); the belt on its +x side and past the shadow's end stays as it was,
+    and a flat part casts none that shows."""
     cam = CameraSpec(width=320, height=240, focal_px=280.0)
     depth = 0.4
 
     def image(height_mm: float, shadow: tuple[float, float, float]) -> np.ndarray:
         part = PartSpec(60, 40, height_mm, 0.0, 0.0, 0.0, intensity=180)
         scene = SceneSpec(cam, (part,), n_frames=1, noise_sigma=0, blur_samples=1, belt_level=100.0,
-                          cast_shadow=shadow, shadow_softness_mm=1.0)
+                          cast_shadow=shadow, lamp_size_deg=6.0)
         return Renderer(scene).render(0)[0].astype(np.float64)
 
     calib = CameraSpec.calibration(cam)
 
-    def at(x_mm: float, y_mm: float) -> tuple[int, int]:
+    def ratio(shaded: np.ndarray, plain: np.ndarray, x_mm: float, y_mm: float = 0.0) -> float:
         u, v = cv2.projectPoints(np.array([[x_mm, y_mm, 0.0]]), calib.belt_rvec, calib.belt_tvec,
                                  calib.camera_matrix, calib.dist_coeffs)[0].reshape(2)
-        return int(round(v)), int(round(u))
+        at = int(round(v)), int(round(u))
+        return shaded[at] / plain[at]
 
     lamp = (0.0, 45.0, depth)
     plain, shaded = image(20.0, (0.0, 90.0, 0.0)), image(20.0, lamp)
-    for x_mm in (-33.0, -40.0, -47.0):  # 3-17 mm beyond the -x end: in the shadow
-        ratio = shaded[at(x_mm, 0.0)] / plain[at(x_mm, 0.0)]
-        assert abs(ratio - (1 - depth)) < 0.02, (x_mm, ratio)
-    for x_mm, y_mm in ((-53.0, 0.0), (36.0, 0.0), (-40.0, 26.0)):  # past its end, the lit side, beside it
-        assert abs(shaded[at(x_mm, y_mm)] - plain[at(x_mm, y_mm)]) <= 1.0, (x_mm, y_mm)
+    for x_mm in (-33.0, -40.0, -45.0):  # 3-15 mm beyond the -x end: in the shadow
+        assert abs(ratio(shaded, plain, x_mm) - (1 - depth)) < 0.02, x_mm
+    assert 1 - depth + 0.05 < ratio(shaded, plain, -50.0) < 0.95  # its far end: the penumbra
+    for x_mm, y_mm in ((-55.0, 0.0), (36.0, 0.0), (-40.0, 26.0)):  # past its end, the lit side, beside it
+        assert abs(ratio(shaded, plain, x_mm, y_mm) - 1) <= 0.01, (x_mm, y_mm)
     flat_plain, flat_shaded = image(0.0, (0.0, 90.0, 0.0)), image(0.0, lamp)
     assert np.abs(flat_shaded - flat_plain).max() <= 1.0

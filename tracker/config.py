@@ -118,6 +118,10 @@ class MeasureConfig:
     # Minimum |part - belt| contrast (grey levels) for a sub-pixel measurement; on the plain belt model
     # no more than segment.faint_threshold (a face it joins to a part is read).
     min_contrast: float = 20.0
+    # On the plain belt model, a bright part's edge whose window ends (the darker of its two outermost
+    # pixels) on belt darker than the belt's model by more than this (grey levels) ends in the part's
+    # shadow: it is read against the belt as dark as it is there (see measure._in_shadow).
+    shadow_min_levels: float = 12.0
     # A box's edges are read against the face next to each (one pixel): windows where the belt comes
     # within min_contrast of it are left out, up to this fraction of those on one side of the blob (its
     # left edges along rows, say: there a part's side holds a quarter or more of them unless it is
@@ -200,8 +204,8 @@ class MeasureConfig:
     touch_min_notch_px: float = 3.0
 
     def __post_init__(self) -> None:
-        _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "box_max_rms_px",
-                  "touch_min_notch_px", "sum_sigma_px", "square_mm", "box_max_windows",
+        _positive(self, "min_area_mm2", "roi_margin_px", "side_band_px", "min_contrast", "shadow_min_levels",
+                  "box_max_rms_px", "touch_min_notch_px", "sum_sigma_px", "square_mm", "box_max_windows",
                   "height_votes_per_frame")
         if self.smooth_texture_ratio < 0:
             raise BadInput(f"measure.smooth_texture_ratio: expected >= 0, got {self.smooth_texture_ratio}")

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from tracker.calibration import Calibration, homography_from_pose
-from tracker.castshadow import polygon_cover, shadow_polygon
+from tracker.castshadow import lamp_reaches, polygon_cover, shadow_polygon
 from tracker.geometry import rectangle_corners, wrap_angle_deg
 from tracker.raycast import edge_pixels, interpolate, pixel_rays, subpixel_pattern
 
@@ -130,10 +130,11 @@ class SceneSpec:
     # face and the one opposite differ (0: every face of a kind alike, as under a lamp overhead).
     side_light: tuple[float, float] = (0.0, 0.0)
     # A lamp that casts each part's shadow on the belt (tracker/castshadow.py): (azimuth deg, elevation
-    # deg above the belt, depth: the fraction of the belt's light the shadow takes; 0: none), its edge
-    # a penumbra shadow_softness_mm wide. Parts are drawn over every shadow, theirs and the others'.
+    # deg above the belt, depth: the fraction of the belt's light the shadow takes; 0: none), the lamp
+    # lamp_size_deg across as seen from the belt (its shadows' penumbra). Parts are drawn over every
+    # shadow, theirs and the others'.
     cast_shadow: tuple[float, float, float] = (0.0, 90.0, 0.0)
-    shadow_softness_mm: float = 1.5
+    lamp_size_deg: float = 4.0
 
     def __post_init__(self) -> None:
         _, elevation_deg, depth = self.cast_shadow
@@ -319,24 +320,24 @@ class Renderer:
 
     def _shadow(self, times: np.ndarray) -> np.ndarray:
         """How deep in a shadow each pixel's belt lies (0-1; the deepest of the parts' and occluders',
-        each the mean over the exposure's ``times``). A cylinder's or a bag's is its bounding box's."""
+        each the mean over the exposure's ``times`` and the lamp's disk). A cylinder's or a bag's is its
+        bounding box's."""
         sc = self.scene
-        azimuth_deg, elevation_deg, _ = sc.cast_shadow
+        reaches = lamp_reaches(sc.cast_shadow[0], sc.cast_shadow[1], sc.lamp_size_deg)
         out = np.zeros(self._belt_xy.shape[:2], dtype=np.float32)
         for part in (*sc.parts, *sc.occluders):
             top_mm = part.z_mm + (part.width_mm if part.shape == "cylinder" else part.height_mm)
-            polygons = [shadow_polygon(part.length_mm, part.width_mm, part.z_mm, top_mm, part.pose(float(t)),
-                                       azimuth_deg, elevation_deg) for t in times]
-            # Only the pixels whose belt lies near the shadows' bounds: the whole frame costs 4x a render.
+            polygons = [shadow_polygon(part.length_mm, part.width_mm, part.z_mm, top_mm, part.pose(float(t)), reach)
+                        for t in times for reach in reaches]
+            # Only the pixels whose belt lies within the shadows' bounds: the whole frame costs 4x a render.
             reach = np.vstack(polygons)
-            low, high = reach.min(axis=0) - sc.shadow_softness_mm, reach.max(axis=0) + sc.shadow_softness_mm
-            near = np.all((self._belt_xy >= low) & (self._belt_xy <= high), axis=-1)
+            near = np.all((self._belt_xy >= reach.min(axis=0)) & (self._belt_xy <= reach.max(axis=0)), axis=-1)
             if not near.any():
                 continue
             rows, cols = np.nonzero(near.any(axis=1))[0], np.nonzero(near.any(axis=0))[0]
             window = np.s_[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
-            cover = sum(polygon_cover(self._belt_xy[window], p, sc.shadow_softness_mm) for p in polygons)
-            out[window] = np.maximum(out[window], cover / len(times))
+            cover = sum(polygon_cover(self._belt_xy[window], p) for p in polygons)
+            out[window] = np.maximum(out[window], cover / len(polygons))
         return out
 
     # --- frames -----------------------------------------------------------------------------
