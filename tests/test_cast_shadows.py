@@ -14,7 +14,7 @@ from conftest import BOX_SUPERSAMPLE, rendered, run_pipeline
 from tracker.config import MeasureConfig, SegmentConfig, TrackerConfig
 from tracker.evaluate import evaluate
 from tracker.segment import Segmenter
-from tracker.synthetic import CameraSpec, PartSpec, SceneSpec
+from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec
 
 
 def _scene(height_mm: float, tilt_deg: float, lamp: tuple[float, float], intensity: float = 190.0,
@@ -56,9 +56,9 @@ def _masks(scene: SceneSpec, index: int) -> tuple[np.ndarray, np.ndarray]:
     segmenter = Segmenter(SegmentConfig())
     for image, _ in frames:
         mask = segmenter(image)
+    # Frames are rendered independently: only the one compared, without its shadow and its noise.
     alone = replace(scene, cast_shadow=(0.0, 90.0, 0.0), noise_sigma=0.0)
-    part = cv2.absdiff(rendered(replace(alone, n_frames=index + 1))[1][index][0],
-                       rendered(replace(alone, parts=(), n_frames=1))[1][0][0]) > 5
+    part = cv2.absdiff(Renderer(alone).render(index)[0], Renderer(replace(alone, parts=())).render(index)[0]) > 5
     return mask > 0, part
 
 
