@@ -136,15 +136,17 @@ class Segmenter:
         touching = cv2.bitwise_and(darker, cv2.dilate(lighter, _SHADOW_TOUCH))
         if not cv2.countNonZero(touching):
             return fg
-        # Each dark region a touching pixel lies in, filled from one of them (cheaper than a labelling).
-        shadow = np.zeros((darker.shape[0] + 2, darker.shape[1] + 2), dtype=np.uint8)
+        # Each dark region a touching pixel lies in, filled from one of them (cheaper than a labelling), over
+        # the whole frame: a tall part's shadow can reach past the window, and cut there its far end would
+        # stay a blob of its own.
+        _, dark = cv2.threshold(cv2.subtract(belt, frame), faint, 255, cv2.THRESH_BINARY)
+        dark = cv2.bitwise_and(dark, fg)
+        shadow = np.zeros((rows + 2, cols + 2), dtype=np.uint8)
         for contour in cv2.findContours(touching, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0]:
-            seed = (int(contour[0, 0, 0]), int(contour[0, 0, 1]))
+            seed = (int(contour[0, 0, 0]) + window[1].start, int(contour[0, 0, 1]) + window[0].start)
             if not shadow[seed[1] + 1, seed[0] + 1]:
-                cv2.floodFill(darker, shadow, seed, 0, flags=8 | cv2.FLOODFILL_MASK_ONLY | (255 << 8))
-        out = fg.copy()
-        out[window] = cv2.bitwise_and(out[window], cv2.bitwise_not(shadow[1:-1, 1:-1]))
-        return out
+                cv2.floodFill(dark, shadow, seed, 0, flags=8 | cv2.FLOODFILL_MASK_ONLY | (255 << 8))
+        return cv2.bitwise_and(fg, cv2.bitwise_not(shadow[1:-1, 1:-1]))
 
     def _joined(self, off: np.ndarray, seeds: np.ndarray, mask: np.ndarray) -> np.ndarray:
         """The window's foreground that ``seeds`` (its foreground on one side of the belt's level) lie in,
