@@ -508,14 +508,18 @@ class Measurer:
         if cv2.countNonZero(belt) < _MIN_BELT_PX or cv2.countNonZero(inner) < _MIN_BELT_PX:
             return None
         ref8 = cv2.convertScaleAbs(ref)
+        ref_here = max(_median_u8(ref8, belt), 1.0)
 
         def levels(image: np.ndarray) -> tuple[float, np.ndarray, float]:
             # The belt's level around the blob, its model scaled by this frame's lighting gain against
-            # it there, and the part's own.
+            # it there (outside a bright part's shadow), and the part's own.
             belt_here, part_here = _median_u8(image, belt), _median_u8(image, inner)
-            lit = self._lit(image, ref8, belt) if part_here > belt_here and not self._coarse_reference else belt
-            belt_here = _median_u8(image, lit)
-            level = belt_here / max(_median_u8(ref8, lit), 1.0) * ref
+            lit = self._lit(image, ref8, belt) if part_here > belt_here and not self._coarse_reference else None
+            if lit is None:
+                level = belt_here / ref_here * ref
+            else:
+                belt_here = _median_u8(image, lit)
+                level = belt_here / max(_median_u8(ref8, lit), 1.0) * ref
             if self._coarse_reference:
                 level = _plane_corrected(level, image, belt, _PLANE_MAX_OF_CONTRAST * abs(part_here - belt_here))
             return belt_here, level, part_here
@@ -537,13 +541,14 @@ class Measurer:
             rows, cols = (_in_shadow(c, self.config.shadow_min_levels) for c in (rows, cols))
         return _Crossed(rows, cols, (x0, y0), part_level, belt_here, blur_px)
 
-    def _lit(self, image: np.ndarray, ref8: np.ndarray, belt: np.ndarray) -> np.ndarray:
+    def _lit(self, image: np.ndarray, ref8: np.ndarray, belt: np.ndarray) -> np.ndarray | None:
         """Of the ``belt`` pixels around a bright part, those not in its shadow (darker than the model by
-        more than measure.shadow_min_levels; all of them where too few are left): the shadow is the
-        part's, not the frame's lighting, which the belt around the part tells."""
+        more than measure.shadow_min_levels): the shadow is the part's, not the frame's lighting, which
+        the belt around the part tells. None: all of them (none in a shadow, or too few left outside)."""
         _, dark = cv2.threshold(cv2.subtract(ref8, image), self.config.shadow_min_levels, 255, cv2.THRESH_BINARY)
         lit = cv2.bitwise_and(belt, cv2.bitwise_not(dark))
-        return lit if cv2.countNonZero(lit) >= _MIN_BELT_PX else belt
+        left = cv2.countNonZero(lit)
+        return lit if _MIN_BELT_PX <= left < cv2.countNonZero(belt) else None
 
     def _texture_strong(self, img8: np.ndarray, belt_level: np.ndarray, belt: np.ndarray, contrast: float) -> bool:
         """Whether the belt's texture around a part (its pixels' median deviation from the belt model) is

@@ -330,8 +330,8 @@ class Renderer:
             polygons = [shadow_polygon(part.length_mm, part.width_mm, part.z_mm, top_mm, part.pose(float(t)), reach)
                         for t in times for reach in reaches]
             # Only the pixels whose belt lies within the shadows' bounds: the whole frame costs 4x a render.
-            reach = np.vstack(polygons)
-            near = np.all((self._belt_xy >= reach.min(axis=0)) & (self._belt_xy <= reach.max(axis=0)), axis=-1)
+            outlines = np.vstack(polygons)
+            near = np.all((self._belt_xy >= outlines.min(axis=0)) & (self._belt_xy <= outlines.max(axis=0)), axis=-1)
             if not near.any():
                 continue
             rows, cols = np.nonzero(near.any(axis=1))[0], np.nonzero(near.any(axis=0))[0]

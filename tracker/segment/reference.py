@@ -65,11 +65,12 @@ class Segmenter:
             self._first(frame)
             return np.zeros(frame.shape, dtype=np.uint8)
         # The faint faces of parts too: the reference learns none of them either.
-        fg = self._with_faint(frame, self.background)
+        sides = _sides(frame, self.background)
+        fg = self._with_faint(sides)
         if self._suspect is not None:
             fg = self._start_up(frame, fg)
         # A bright part's shadow is left out of what is measured, not of what the reference must not learn.
-        mask = cv2.morphologyEx(self._without_shadows(frame, fg), cv2.MORPH_OPEN, self._kernel)
+        mask = cv2.morphologyEx(self._without_shadows(sides, fg), cv2.MORPH_OPEN, self._kernel)
         self._learn_stripe(frame, fg, self._count % cfg.background_every)
         if self._count % cfg.background_every == 0:
             self._absorb_parked(frame, fg)
@@ -77,20 +78,19 @@ class Segmenter:
         self._count += 1
         return mask
 
-    def _with_faint(self, frame: np.ndarray, belt: np.ndarray) -> np.ndarray:
-        """Foreground: ``frame`` more than segment.diff_threshold off ``belt``, and the faint pixels (more than
-        segment.faint_threshold off) connected to it on the same side of the belt's level. A box's side face
-        in shadow is part of its silhouette, and left out, its outer edge is not where the mask's boundary
-        puts the windows that read it (bench/heights_random.py scene 11, a 20 mm box at 20 deg whose long
-        faces differ from the belt by 22 levels: its width 4.4-5.6 mm short with the height given). A faint
-        region touching no foreground stays belt (a stain, the belt's own shading), and so does a bright
-        part's faint shadow (darker than the belt)."""
+    def _with_faint(self, sides: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """Foreground: pixels more than segment.diff_threshold off the belt (``sides``: how much brighter,
+        darker than it each pixel is; see _sides), and the faint pixels (more than segment.faint_threshold
+        off) connected to it on the same side of the belt's level. A box's side face in shadow is part of
+        its silhouette, and left out, its outer edge is not where the mask's boundary puts the windows that
+        read it (bench/heights_random.py scene 11, a 20 mm box at 20 deg whose long faces differ from the
+        belt by 22 levels: its width 4.4-5.6 mm short with the height given). A faint region touching no
+        foreground stays belt (a stain, the belt's own shading)."""
         cfg = self.config
-        if not 0 < cfg.faint_threshold < cfg.diff_threshold:
-            return cv2.threshold(cv2.absdiff(frame, belt), cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1]
-        sides = cv2.subtract(frame, belt), cv2.subtract(belt, frame)  # how much brighter, darker than the belt
         strong = [cv2.threshold(off, cfg.diff_threshold, 255, cv2.THRESH_BINARY)[1] for off in sides]
         mask = cv2.bitwise_or(*strong)
+        if not 0 < cfg.faint_threshold < cfg.diff_threshold:
+            return mask
         # Only around each blob (a faint face reaches at most _FAINT_REACH_PX past its bounding box), the
         # largest segment.max_blobs (as many as are measured: the work per frame stays bounded).
         rows, cols = mask.shape
@@ -109,8 +109,9 @@ class Segmenter:
                     out[window] = cv2.bitwise_or(out[window], self._joined(off[window], seeds[window], mask[window]))
         return out
 
-    def _without_shadows(self, frame: np.ndarray, fg: np.ndarray) -> np.ndarray:
-        """``fg`` less the shadows bright parts cast: its regions darker than the belt (by more than
+    def _without_shadows(self, sides: tuple[np.ndarray, np.ndarray], fg: np.ndarray) -> np.ndarray:
+        """``fg`` less the shadows bright parts cast (``sides``: how much brighter, darker than the belt
+        each pixel is; see _sides): its regions darker than the belt (by more than
         segment.faint_threshold) that touch a bright part (brighter than it by more than
         segment.diff_threshold, with its faint faces).
         A lamp to one side darkens the belt beside a part by tens of grey levels; joined to the part's blob
@@ -119,8 +120,8 @@ class Segmenter:
         the part by its level), and so does a dark part touching a bright one, which is taken for its
         shadow (two parts touching are cut apart by measure's split in any case, not by this)."""
         cfg = self.config
-        belt = self.background
-        _, bright = cv2.threshold(cv2.subtract(frame, belt), cfg.diff_threshold, 255, cv2.THRESH_BINARY)
+        lighter_by, darker_by = sides
+        _, bright = cv2.threshold(lighter_by, cfg.diff_threshold, 255, cv2.THRESH_BINARY)
         if not cv2.countNonZero(bright):
             return fg
         # Only around the bright foreground, as far as a faint face reaches (_FAINT_REACH_PX).
@@ -130,17 +131,15 @@ class Segmenter:
                   slice(max(x - _FAINT_REACH_PX, 0), min(x + w + _FAINT_REACH_PX, cols)))
         # The bright part with its faint faces: a tall part's side can lie between its top and its shadow.
         faint = cfg.faint_threshold or cfg.diff_threshold
-        lighter, darker = (cv2.bitwise_and(cv2.threshold(off, faint, 255, cv2.THRESH_BINARY)[1], fg[window])
-                           for off in (cv2.subtract(frame[window], belt[window]),
-                                       cv2.subtract(belt[window], frame[window])))
+        lighter, darker = (cv2.bitwise_and(cv2.threshold(off[window], faint, 255, cv2.THRESH_BINARY)[1], fg[window])
+                           for off in sides)
         touching = cv2.bitwise_and(darker, cv2.dilate(lighter, _SHADOW_TOUCH))
         if not cv2.countNonZero(touching):
             return fg
         # Each dark region a touching pixel lies in, filled from one of them (cheaper than a labelling), over
         # the whole frame: a tall part's shadow can reach past the window, and cut there its far end would
         # stay a blob of its own.
-        _, dark = cv2.threshold(cv2.subtract(belt, frame), faint, 255, cv2.THRESH_BINARY)
-        dark = cv2.bitwise_and(dark, fg)
+        dark = cv2.bitwise_and(cv2.threshold(darker_by, faint, 255, cv2.THRESH_BINARY)[1], fg)
         shadow = np.zeros((rows + 2, cols + 2), dtype=np.uint8)
         for contour in cv2.findContours(touching, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0]:
             seed = (int(contour[0, 0, 0]) + window[1].start, int(contour[0, 0, 1]) + window[0].start)
@@ -182,7 +181,7 @@ class Segmenter:
         level = np.full_like(frame, round(_median_level(frame, self._roi)))
         # With the faint faces next to it (see _with_faint): taken as belt, a dark side would stay in
         # the reference, and read against it the part's edges there would not be read.
-        suspect = self._with_faint(frame, level)
+        suspect = self._with_faint(_sides(frame, level))
         if self._roi is not None:
             suspect = cv2.bitwise_and(suspect, self._roi)
         area = frame.size if self._roi is None else cv2.countNonZero(self._roi)
@@ -301,6 +300,11 @@ class Segmenter:
                     and abs(cv2.mean(img, mask=blob)[0] - belt) < self.config.diff_threshold / 2):
                 ghosts[y0:y1, x0:x1] |= blob
         return parked, ghosts
+
+
+def _sides(frame: np.ndarray, belt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How much brighter, and how much darker, than ``belt`` each pixel of ``frame`` is (uint8, saturated)."""
+    return cv2.subtract(frame, belt), cv2.subtract(belt, frame)
 
 
 def _median_level(image: np.ndarray, mask: np.ndarray | None = None) -> float:
