@@ -16,8 +16,9 @@ run: $(STAMP)
 	@echo "make run: the live view is at http://127.0.0.1:8080/ while the demo plays"
 	$(BIN)/tracker run --web 127.0.0.1:8080
 
+# Two workers (this is a 2-core machine); --dist loadfile keeps each file's cached scenes in one worker.
 test: $(STAMP) lint
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
 lint: $(STAMP)
 	$(BIN)/ruff check tracker plc tests bench

@@ -18,7 +18,7 @@ import pytest
 from conftest import BOX_SUPERSAMPLE, rendered, run_pipeline
 from test_heights import _box_scene, _dark_box_scene
 from test_textured_knurl import _scene as knurl_scene
-from textured_support import textured_run
+from textured_support import flat_textured_results, textured_run
 
 from tracker.boxfit import ViewShades
 from tracker.config import MeasureConfig, SegmentConfig, TrackConfig, TrackerConfig
@@ -864,12 +864,12 @@ def test_a_part_found_flat_is_measured_exactly_as_flat_mode_measures_it():
     0.2-0.5 mm off in one frame of three)."""
     frames, _, t_ns = textured_run(30.0)
     segment = SegmentConfig(model="textured")
-    runs = {}
-    for auto in (False, True):
-        pipeline = Pipeline(CameraSpec().calibration(),
-                            TrackerConfig(segment=segment, measure=MeasureConfig(estimate_height=auto)))
-        runs[auto] = [[o for o in pipeline.process(i, f, t).objects if o.measured]
-                      for i, (f, t) in enumerate(zip(frames, t_ns, strict=True))]
+    # Flat mode's run is test_textured_belt's (shared: the same frames, the same settings).
+    runs = {False: [[o for o in result.objects if o.measured] for result in flat_textured_results(30.0)]}
+    pipeline = Pipeline(CameraSpec().calibration(),
+                        TrackerConfig(segment=segment, measure=MeasureConfig(estimate_height=True)))
+    runs[True] = [[o for o in pipeline.process(i, f, t).objects if o.measured]
+                  for i, (f, t) in enumerate(zip(frames, t_ns, strict=True))]
     compared, flat_before = 0, False
     for flat_mode, auto in zip(runs[False], runs[True], strict=True):
         found_flat = [o for o in auto if o.height_converged and o.height_mm == 0.0]

@@ -16,9 +16,14 @@ import cv2
 import numpy as np
 from conftest import rendered
 
+from tracker.config import MeasureConfig, SegmentConfig, TrackerConfig
+from tracker.pipeline import Pipeline
 from tracker.synthetic import CameraSpec, PartSpec, SceneSpec, mpeg4_round_trip
 
 FPS = 30.0
+# The belt model under test, its flat parts measured as flat (--part-height 0): with auto, the default,
+# their first votes lead at 5-10 mm there (tests/test_height_auto.py measures that).
+FLAT_TEXTURED = TrackerConfig(segment=SegmentConfig(model="textured"), measure=MeasureConfig(estimate_height=False))
 BELT_LEVEL = 60.0
 # 150 mm/s at 30 fps on a straight-down camera at 1.25 mm/px: 4 px of belt per frame along +x
 # (less than half the knurl's period, as a camera must be set up to see a belt's motion).
@@ -84,3 +89,12 @@ def textured_run(contrast: float, compress: bool = True) -> tuple[list[np.ndarra
     if compress:
         out = mpeg4_round_trip(out, FPS)
     return out, truths, [round(i * 1e9 / FPS) for i in range(len(out))]
+
+
+@functools.cache
+def flat_textured_results(contrast: float) -> tuple:
+    """Each frame's pipeline result over ``textured_run(contrast)`` with FLAT_TEXTURED (shared by the
+    tests that need that run: it costs seconds)."""
+    frames, _, t_ns = textured_run(contrast)
+    pipeline = Pipeline(CameraSpec().calibration(), FLAT_TEXTURED)
+    return tuple(pipeline.process(i, f, t) for i, (f, t) in enumerate(zip(frames, t_ns, strict=True)))
