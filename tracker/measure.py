@@ -33,7 +33,7 @@ from tracker.calibration import apply_homography
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, rectangle_corners, refine_rect
 from tracker.height import HeightTrial, vote_due
-from tracker.segment.textured import SmoothedView
+from tracker.segment.views import SmoothedView
 from tracker.shadebounds import ShadeBounds, shade_bounds
 from tracker.shades import FaceShades
 from tracker.split import SplitRule, deepest_notch_px, split_blob

@@ -14,7 +14,7 @@ moves too. Two things stay true while it moves, and this model rests on them:
 
 Foreground is where the smoothed level leaves the belt's mean by more than a floor and
 by more than a few of its standard deviations. Each part's outline is then drawn at full
-resolution where its contrast falls to half its own (``_outline``); ``reference`` is the
+resolution, on its own side of the belt's level (``outline.outline_parts``); ``reference`` is the
 belt's mean seen at full resolution, for the measurement's sub-pixel edges.
 """
 
@@ -24,6 +24,8 @@ import cv2
 import numpy as np
 
 from tracker.config import SegmentConfig
+from tracker.segment.outline import OutlineGeometry, outline_parts
+from tracker.segment.views import UpsampledView
 
 # Belt travel (working pixels) that counts as one full learning step.
 _STEP_PX = 1.0
@@ -41,16 +43,12 @@ _EDGE_WORK_PX = 4
 _MIN_PART_WORK_PX = 5
 # The belt's gain is followed only while at least this fraction of the working image shows belt.
 _MIN_BELT_FRACTION = 0.1
-# Blobs smaller than this (working pixels) are specks, not parts: never outlined.
-_MIN_BLOB_WORK_PX = 6
 # A blob is stationary (scenery, not a part) when the belt travelled at least this far (working
 # pixels) since the last frame and the blob matches the last frame in place this much better than
 # moved along with the belt; it is then learnt at this rate per frame.
 _STATIONARY_TRAVEL_WORK_PX = 0.25
 _STATIONARY_RATIO = 0.5
 _STATIONARY_RATE = 0.2
-# A blob's own contrast: this percentile of its |level - belt| (its body, not its blurred rim).
-_BLOB_LEVEL_PERCENTILE = 90
 
 
 class TexturedSegmenter:
@@ -81,7 +79,8 @@ class TexturedSegmenter:
         # "Near" a pixel for its peak contrast: a shadow or glow this close to a part is judged against it.
         self._near = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * _NEAR_WORK_PX + 1,) * 2)
         # One working pixel, at full resolution: how far a hull may grow to the half-contrast edge.
-        self._band = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * round(1 / self._scale) + 1,) * 2)
+        band = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * round(1 / self._scale) + 1,) * 2)
+        self._geometry = OutlineGeometry(self._size, self._scale, self._near, self._thin, band)
         self.mean: np.ndarray | None = None
         self._prev: np.ndarray | None = None
         # Working pixels of the last frame that showed plain belt (far from any foreground).
@@ -131,53 +130,7 @@ class TexturedSegmenter:
         ghosts = self._absorb_ghosts(small, fg)
         # Open: thin streaks, seams and edges across the belt are no parts.
         fg = cv2.morphologyEx(cv2.bitwise_and(fg, cv2.bitwise_not(ghosts)), cv2.MORPH_OPEN, self._thin)
-        return cv2.bitwise_and(self._outline(contrast, fg), self._roi)
-
-    def _outline(self, contrast: np.ndarray, fg: np.ndarray) -> np.ndarray:
-        """The full-resolution mask: each part is the convex hull of its foreground pixels of at
-        least half the strongest contrast near them, grown to where the (interpolated) contrast
-        falls to half the part's own.
-
-        A part's edge is where a pixel is half part, half belt; its shadow, or the light it throws
-        on the belt, is far fainter than the part beside it and drops out, while the part's own
-        darker or lighter patches (print, folds, a screen) are inside the hull and keep it one blob.
-        Only the largest blobs are outlined: the work per frame is bounded.
-        """
-        w, h = self._size
-        mask = np.zeros((h, w), np.uint8)
-        if not cv2.countNonZero(fg):
-            return mask
-        peak = cv2.dilate(contrast, self._near)
-        strong = cv2.bitwise_and(fg, cv2.compare(contrast, 0.5 * peak, cv2.CMP_GE))
-        # Gaps narrower than the narrowest part are inside one (a display, a fold, a print).
-        strong = cv2.morphologyEx(strong, cv2.MORPH_CLOSE, self._thin)
-        n, labels, stats, _ = cv2.connectedComponentsWithStats(strong, connectivity=8)
-        full = UpsampledView(contrast, self._size, self._scale)
-        scale = self._scale
-        order = np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable")[: self.config.max_blobs] + 1
-        for i in order:
-            x, y, bw, bh, area = stats[i]
-            if area < _MIN_BLOB_WORK_PX:
-                continue
-            box = (slice(y, y + bh), slice(x, x + bw))
-            inside = labels[box] == i
-            level = float(np.percentile(contrast[box][inside], _BLOB_LEVEL_PERCENTILE))
-            if level < self.config.min_part_contrast:
-                continue  # too faint for a part: a stain, a sheet, light on the belt
-            half = 0.5 * level
-            points = cv2.findNonZero(inside.astype(np.uint8))
-            hull = (cv2.convexHull(points).reshape(-1, 2) + (x, y) + 0.5) / scale - 0.5
-            # The band one working pixel around the hull, at full resolution.
-            x0, y0 = np.floor(hull.min(axis=0) - 1.5 / scale).astype(int)
-            x1, y1 = np.ceil(hull.max(axis=0) + 1.5 / scale).astype(int)
-            x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w, x1 + 1), min(h, y1 + 1)
-            poly = np.round(hull - (x0, y0)).astype(np.int32)
-            blob = np.zeros((y1 - y0, x1 - x0), np.uint8)
-            cv2.fillConvexPoly(blob, poly, 255)
-            band = cv2.dilate(blob, self._band)
-            grown = cv2.bitwise_and(cv2.compare(full[y0:y1, x0:x1], half, cv2.CMP_GE), band)
-            mask[y0:y1, x0:x1] |= cv2.bitwise_or(blob, grown)
-        return mask
+        return cv2.bitwise_and(outline_parts(diff, fg, self._geometry, cfg), self._roi)
 
     def _start(self, small: np.ndarray) -> None:
         """First frame: the belt runs along the region's long side, so each line along it is mostly
@@ -254,48 +207,3 @@ class TexturedSegmenter:
                     # Rails, glare, a floor or rollers: belt scenery, not a part.
                     cv2.accumulateWeighted(img, self.mean[y0:y1, x0:x1], _STATIONARY_RATE, mask=blob)
         return ghosts
-
-
-class UpsampledView:
-    """A small image seen at full resolution (bilinear, as ``cv2.resize`` would scale it up),
-    computed only for the slices asked for: ``view[y0:y1, x0:x1]`` is a float32 array."""
-
-    def __init__(self, small: np.ndarray, size: tuple[int, int], scale: float) -> None:
-        self._small = small
-        self._scale = scale
-        self.shape = (size[1], size[0])
-
-    def __getitem__(self, key: tuple[slice, slice]) -> np.ndarray:
-        rows, cols = key
-        y0, y1, _ = rows.indices(self.shape[0])
-        x0, x1, _ = cols.indices(self.shape[1])
-        s = self._scale
-        # Full pixel centre (x + 0.5) sits at (x + 0.5) * s - 0.5 in the small image.
-        m = np.float32([[s, 0, (x0 + 0.5) * s - 0.5], [0, s, (y0 + 0.5) * s - 0.5]])
-        return cv2.warpAffine(self._small, m, (max(0, x1 - x0), max(0, y1 - y0)),
-                              flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
-
-    def full(self) -> np.ndarray:
-        return self[0 : self.shape[0], 0 : self.shape[1]]
-
-
-class SmoothedView:
-    """A frame seen through a slight blur (8-bit), computed only for the slices asked for: on a
-    textured belt, the measurement's grey-level edges then average the texture over neighbouring
-    rows as well as along each row. The blur is symmetric, so an edge stays where it is."""
-
-    def __init__(self, frame: np.ndarray, sigma_px: float) -> None:
-        self._frame = frame
-        self._sigma = sigma_px
-        self._margin = int(np.ceil(3 * sigma_px))
-        self.shape = frame.shape
-
-    def __getitem__(self, key: tuple[slice, slice]) -> np.ndarray:
-        rows, cols = key
-        y0, y1, _ = rows.indices(self.shape[0])
-        x0, x1, _ = cols.indices(self.shape[1])
-        m = self._margin
-        a0, b0 = max(0, y0 - m), max(0, x0 - m)
-        crop = self._frame[a0 : min(self.shape[0], y1 + m), b0 : min(self.shape[1], x1 + m)]
-        blurred = cv2.GaussianBlur(crop, (0, 0), self._sigma, borderType=cv2.BORDER_REPLICATE)
-        return blurred[y0 - a0 : y1 - a0, x0 - b0 : x1 - b0]
