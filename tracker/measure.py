@@ -152,12 +152,16 @@ class Measurer:
         self._split_rule = SplitRule(config.touch_min_notch_px, self._min_area_px)
         self._known: Sequence[KnownPart] = ()
         self._votes_left = 0
+        self._shadows = None
 
     def __call__(self, frame: np.ndarray, reference: np.ndarray, mask: np.ndarray,
-                 known: Sequence[KnownPart] = ()) -> list[Measurement]:
+                 known: Sequence[KnownPart] = (), shadows=None) -> list[Measurement]:
         """Measure every blob of ``mask``; ``reference`` is the empty belt (float32 or uint8); ``known``:
-        the parts tracked so far, where they are expected now and their sizes (boxes use them)."""
+        the parts tracked so far, where they are expected now and their sizes (boxes use them);
+        ``shadows``: where the segmentation found light parts' shadows (indexable like the frame, > 0 in
+        them; None: not told), on a coarse reference the only belt read as shadowed."""
         self._known = known
+        self._shadows = shadows
         self._votes_left = self.config.height_votes_per_frame
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         contours = [c for c in contours if cv2.contourArea(c) >= self._min_area_px]
@@ -534,12 +538,17 @@ class Measurer:
         k = HALF_WINDOW_PX
         rows = _boundary_crossings(img8, belt_level, inside, k, blocked)
         cols = _boundary_crossings(img8.T, belt_level.T, inside.T, k, None if blocked is None else blocked.T)
-        if part_level > belt_here and not self._coarse_reference:
-            # Not on a textured belt: its model is a coarse mean of a pattern passing under each pixel,
-            # and a pixel darker than it is the knurl as often as a shadow (bench/heights_random.py
-            # --textured, read as shadows: 12 scenes' heights closer, 10 further, 13 -> 12 of 30).
+        if part_level > belt_here and (not self._coarse_reference or self._shadowed(x0, y0, x1, y1)):
+            # On a textured belt only beside a shadow the segmentation found: its model is a coarse mean
+            # of a pattern passing under each pixel, and a pixel darker than it is the knurl as often as
+            # a shadow (bench/heights_random.py --textured, every part's windows read as in shadows: 12
+            # scenes' heights closer, 10 further, 13 -> 12 of 30).
             rows, cols = (_in_shadow(c, self.config.shadow_min_levels) for c in (rows, cols))
         return _Crossed(rows, cols, (x0, y0), part_level, belt_here, blur_px)
+
+    def _shadowed(self, x0: int, y0: int, x1: int, y1: int) -> bool:
+        """Whether the segmentation found a shadow in the window (x0, y0)-(x1, y1)."""
+        return self._shadows is not None and float(np.max(self._shadows[y0:y1, x0:x1], initial=0.0)) > 127.0
 
     def _lit(self, image: np.ndarray, ref8: np.ndarray, belt: np.ndarray) -> np.ndarray | None:
         """Of the ``belt`` pixels around a bright part, those not in its shadow (darker than the model by

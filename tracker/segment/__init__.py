@@ -23,6 +23,9 @@ __all__ = ["BeltModel", "Segmenter", "TexturedSegmenter", "make_segmenter"]
 class BeltModel(Protocol):
     # Expected empty-belt image (float32, frame size) for sub-pixel edges; None before the first frame.
     reference: np.ndarray | None
+    # Where the last frame's light parts cast shadows (> 0 in them, indexable like the frame), for a
+    # model whose reference cannot tell a shadow from the belt's texture; None: not told.
+    shadows: object | None
 
     def __call__(self, frame: np.ndarray) -> np.ndarray: ...
 

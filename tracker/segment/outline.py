@@ -68,13 +68,15 @@ class OutlineGeometry:
     band: np.ndarray  # one working pixel at full resolution: how far a hull grows
 
 
-def outline_parts(diff: np.ndarray, fg: np.ndarray, geo: OutlineGeometry, config: SegmentConfig) -> np.ndarray:
-    """The full-resolution mask of the parts in ``fg`` (working resolution); ``diff``: the working
-    image less the belt's level (float32). Only the largest segment.max_blobs blobs are outlined."""
+def outline_parts(diff: np.ndarray, fg: np.ndarray, geo: OutlineGeometry,
+                  config: SegmentConfig) -> tuple[np.ndarray, np.ndarray | None]:
+    """The full-resolution mask of the parts in ``fg`` (working resolution), and the light parts'
+    shadows left out of it (working resolution; None: none); ``diff``: the working image less the
+    belt's level (float32). Only the largest segment.max_blobs blobs are outlined."""
     w, h = geo.size
     mask = np.zeros((h, w), np.uint8)
     if not cv2.countNonZero(fg):
-        return mask
+        return mask, None
     contrast = np.abs(diff)
     strong = cv2.bitwise_and(fg, cv2.compare(contrast, 0.5 * cv2.dilate(contrast, geo.near), cv2.CMP_GE))
     lighter = cv2.compare(diff, 0, cv2.CMP_GT)
@@ -89,7 +91,7 @@ def outline_parts(diff: np.ndarray, fg: np.ndarray, geo: OutlineGeometry, config
     for i in np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable")[: config.max_blobs] + 1:
         if stats[i, cv2.CC_STAT_AREA] >= _MIN_BLOB_WORK_PX and levels[i] >= config.min_part_contrast:
             _draw(mask, labels, stats[i], i, levels[i], diff, fg, full_diff, geo)
-    return mask
+    return mask, shadows
 
 
 def _levels(contrast: np.ndarray, labels: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -52,6 +52,8 @@ class Segmenter:
         # The learnt reference (float32): measurement reads it, since rounding it to 8 bits
         # would bias sub-pixel edges by up to ~0.01 px.
         self.reference: np.ndarray | None = None
+        # Its edges beside a shadow are told from its exact reference (measure._in_shadow): never told.
+        self.shadows = None
         # Per pixel: learning steps its blob has been foreground without moving (uint8).
         self._still_steps: np.ndarray | None = None
         self.background: np.ndarray | None = None  # uint8 copy of the reference

@@ -90,6 +90,9 @@ class TexturedSegmenter:
         # one before; set by the pipeline from the belt's measured motion before each frame.
         self.shift_px = (0.0, 0.0)
         self.duplicate = False
+        # The light parts' shadows in the last frame (255 in them; None: none), seen at full resolution:
+        # the edges beside them are read against the belt as dark as it is there.
+        self.shadows: UpsampledView | None = None
 
     @property
     def reference(self) -> UpsampledView | None:
@@ -130,7 +133,9 @@ class TexturedSegmenter:
         ghosts = self._absorb_ghosts(small, fg)
         # Open: thin streaks, seams and edges across the belt are no parts.
         fg = cv2.morphologyEx(cv2.bitwise_and(fg, cv2.bitwise_not(ghosts)), cv2.MORPH_OPEN, self._thin)
-        return cv2.bitwise_and(outline_parts(diff, fg, self._geometry, cfg), self._roi)
+        mask, shadows = outline_parts(diff, fg, self._geometry, cfg)
+        self.shadows = None if shadows is None else UpsampledView(shadows.astype(np.float32), self._size, self._scale)
+        return cv2.bitwise_and(mask, self._roi)
 
     def _start(self, small: np.ndarray) -> None:
         """First frame: the belt runs along the region's long side, so each line along it is mostly
