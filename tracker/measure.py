@@ -33,7 +33,7 @@ from tracker.calibration import apply_homography
 from tracker.config import MeasureConfig
 from tracker.geometry import Rect, min_area_rect, rectangle_corners, refine_rect
 from tracker.height import HeightTrial, vote_due
-from tracker.segment.views import SmoothedView
+from tracker.segment.views import SmoothedView, UpsampledView
 from tracker.shadebounds import ShadeBounds, shade_bounds
 from tracker.shades import FaceShades
 from tracker.split import SplitRule, deepest_notch_px, split_blob
@@ -152,10 +152,10 @@ class Measurer:
         self._split_rule = SplitRule(config.touch_min_notch_px, self._min_area_px)
         self._known: Sequence[KnownPart] = ()
         self._votes_left = 0
-        self._shadows = None
+        self._shadows: UpsampledView | None = None
 
     def __call__(self, frame: np.ndarray, reference: np.ndarray, mask: np.ndarray,
-                 known: Sequence[KnownPart] = (), shadows=None) -> list[Measurement]:
+                 known: Sequence[KnownPart] = (), shadows: UpsampledView | None = None) -> list[Measurement]:
         """Measure every blob of ``mask``; ``reference`` is the empty belt (float32 or uint8); ``known``:
         the parts tracked so far, where they are expected now and their sizes (boxes use them);
         ``shadows``: where the segmentation found light parts' shadows (indexable like the frame, > 0 in

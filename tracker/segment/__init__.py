@@ -16,6 +16,7 @@ import numpy as np
 from tracker.config import SegmentConfig
 from tracker.segment.reference import Segmenter
 from tracker.segment.textured import TexturedSegmenter
+from tracker.segment.views import UpsampledView
 
 __all__ = ["BeltModel", "Segmenter", "TexturedSegmenter", "make_segmenter"]
 
@@ -25,7 +26,7 @@ class BeltModel(Protocol):
     reference: np.ndarray | None
     # Where the last frame's light parts cast shadows (> 0 in them, indexable like the frame), for a
     # model whose reference cannot tell a shadow from the belt's texture; None: not told.
-    shadows: object | None
+    shadows: UpsampledView | None
 
     def __call__(self, frame: np.ndarray) -> np.ndarray: ...
 

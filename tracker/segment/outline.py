@@ -158,7 +158,7 @@ def _shadows(contrast: np.ndarray, strong: np.ndarray, lighter: np.ndarray, fg: 
             continue  # within the part: its print, a screen, a fold
         if np.count_nonzero(np.isin(light[box], touched) & (_filled(region) > 0)) >= _INSIDE_FRACTION * part_px:
             continue  # around the part: a label on a dark part
-        shadows[dark == r] = 255
+        shadows[box][region > 0] = 255
     return shadows
 
 
