@@ -32,7 +32,7 @@ def _outline(regions: list[tuple[slice, slice, float]]) -> np.ndarray:
                           cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (13, 13)),
                           cv2.getStructuringElement(cv2.MORPH_RECT, (5, 5)),
                           cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
-    return outline_parts(diff, fg, geo, CONFIG)[0] > 0
+    return outline_parts(diff, np.abs(diff), fg, geo, CONFIG)[0] > 0
 
 
 def _full(rows: slice, cols: slice) -> np.ndarray:

@@ -68,16 +68,16 @@ class OutlineGeometry:
     band: np.ndarray  # one working pixel at full resolution: how far a hull grows
 
 
-def outline_parts(diff: np.ndarray, fg: np.ndarray, geo: OutlineGeometry,
+def outline_parts(diff: np.ndarray, contrast: np.ndarray, fg: np.ndarray, geo: OutlineGeometry,
                   config: SegmentConfig) -> tuple[np.ndarray, np.ndarray | None]:
     """The full-resolution mask of the parts in ``fg`` (working resolution), and the light parts'
     shadows left out of it (working resolution; None: none); ``diff``: the working image less the
-    belt's level (float32). Only the largest segment.max_blobs blobs are outlined."""
+    belt's level (float32), ``contrast`` its absolute value. Only the largest segment.max_blobs blobs
+    are outlined."""
     w, h = geo.size
     mask = np.zeros((h, w), np.uint8)
     if not cv2.countNonZero(fg):
         return mask, None
-    contrast = np.abs(diff)
     strong = cv2.bitwise_and(fg, cv2.compare(contrast, 0.5 * cv2.dilate(contrast, geo.near), cv2.CMP_GE))
     lighter = cv2.compare(diff, 0, cv2.CMP_GT)
     shadows = _shadows(contrast, strong, lighter, fg, config)

@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from tracker.config import SegmentConfig
+from tracker.segment.views import UpsampledView
 
 # Side of the guard band around moving/foreground pixels: blur fringes fainter than the
 # threshold must not leak into the reference. Two dilations reach 2 * (7 // 2) rows.
@@ -53,7 +54,7 @@ class Segmenter:
         # would bias sub-pixel edges by up to ~0.01 px.
         self.reference: np.ndarray | None = None
         # Its edges beside a shadow are told from its exact reference (measure._in_shadow): never told.
-        self.shadows = None
+        self.shadows: UpsampledView | None = None
         # Per pixel: learning steps its blob has been foreground without moving (uint8).
         self._still_steps: np.ndarray | None = None
         self.background: np.ndarray | None = None  # uint8 copy of the reference

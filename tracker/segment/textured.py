@@ -133,7 +133,7 @@ class TexturedSegmenter:
         ghosts = self._absorb_ghosts(small, fg)
         # Open: thin streaks, seams and edges across the belt are no parts.
         fg = cv2.morphologyEx(cv2.bitwise_and(fg, cv2.bitwise_not(ghosts)), cv2.MORPH_OPEN, self._thin)
-        mask, shadows = outline_parts(diff, fg, self._geometry, cfg)
+        mask, shadows = outline_parts(diff, contrast, fg, self._geometry, cfg)
         self.shadows = None if shadows is None else UpsampledView(shadows.astype(np.float32), self._size, self._scale)
         return cv2.bitwise_and(mask, self._roi)
 
