@@ -29,6 +29,10 @@ from tracker.measure import Measurement
 from tracker.pipeline import Pipeline
 from tracker.synthetic import CameraSpec, PartSpec, SceneSpec, mpeg4_round_trip
 
+# How far apart the views that vote are, in the estimates these tests feed views by hand (the pipeline's
+# is a fraction of its view's size).
+STEP_MM = 40.0
+
 
 def _auto(height_mm: float, tilt_deg: float, scene: SceneSpec | None = None, **measure) -> list[tuple[dict, dict]]:
     """(pose, truth) of the part's own track in each frame it was measured: the measured object nearest
@@ -65,6 +69,23 @@ def test_auto_estimates_a_box_height(height_mm, tilt_deg):
     assert max(abs(o["height_mm"] - height_mm) for o, _ in after) <= 0.5, [o["height_mm"] for o, _ in after]
     assert np.mean([centroid_error_mm(o, t) for o, t in after]) <= 0.2
     assert np.mean([centroid_error_mm(o, t) for o, t in frames[:converged[0]]]) <= 1.0
+
+
+def test_a_part_crossing_a_small_view_converges_as_early_in_its_crossing():
+    """A camera 500 mm above the belt with a longer lens sees 400 x 300 mm of it (the tests' camera 800 x
+    600): its views vote a fraction of the view's size apart (track.height_vote_step_fraction), 20 mm
+    here. At a fixed 40 mm, as before, this 10 mm box's vote took 8 views, the last after 41 % of its
+    crossing; 19 % now."""
+    cam = CameraSpec(width=480, height=360, focal_px=600.0, tilt_deg=10.0, yaw_deg=15, height_mm=500.0)
+    part = PartSpec(60, 40, 10.0, -220, -10, 20, 300, 20, omega_deg_s=20.0, intensity=190)
+    scene = SceneSpec(cam, (part,), fps=30, n_frames=48, supersample=BOX_SUPERSAMPLE, blur_samples=3)
+    frames = _auto(10.0, 10.0, scene)
+    assert len(frames) >= 30
+    converged = [i for i, (o, _) in enumerate(frames) if o["height_converged"]]
+    assert converged and converged[0] <= len(frames) / 3, (converged[:1], len(frames))
+    after = frames[converged[0]:]
+    assert max(abs(o["height_mm"] - 10.0) for o, _ in after) <= 0.5, [o["height_mm"] for o, _ in after]
+    assert np.mean([centroid_error_mm(o, t) for o, t in after]) <= 0.2
 
 
 @pytest.mark.parametrize("height_mm,tilt_deg", [(5, 10), (20, 10)])
@@ -156,14 +177,14 @@ def _sizes(x_mm: float, true_mm: float) -> dict[float, float]:
 
 def test_the_vote_takes_views_apart_and_keeps_the_height_whose_sizes_agree():
     cfg = TrackConfig()
-    height = HeightEstimate(cfg)
+    height = HeightEstimate(cfg, STEP_MM)
     assert height.voting and not height.converged and height.leading_mm is None
     x = 0.0
     height.add(_view(x, _sizes(x, 10.0)), x, 0.0)
     # A view nearer than the vote's step to the last one does not vote (it would repeat it).
-    assert not height.wants_vote(x + cfg.height_vote_step_mm / 2, 0.0)
+    assert not height.wants_vote(x + STEP_MM / 2, 0.0)
     for _ in range(cfg.height_vote_min_views - 1):
-        x += cfg.height_vote_step_mm
+        x += STEP_MM
         assert height.voting
         height.add(_view(x, _sizes(x, 10.0)), x, 0.0)
     # Decided (the sizes at 10 mm agree, those at any other height do not): now refined, not converged.
@@ -177,9 +198,9 @@ def test_the_view_that_decides_the_vote_is_posed_at_the_height_decided():
     it: its pose is its box at the height decided (scene 101 of bench/heights_random.py: that view's
     own pose, at the 15.3 mm led before, was 1.35 mm off; its 20 mm box 0.02 mm)."""
     cfg = TrackConfig()
-    height = HeightEstimate(cfg)
+    height = HeightEstimate(cfg, STEP_MM)
     for k in range(cfg.height_vote_views):
-        x = k * cfg.height_vote_step_mm
+        x = k * STEP_MM
         m = _view(x, _sizes(x, 10.0), poses_move_mm=0.1)
         height.add(m, x, 0.0)
         if not height.voting:
@@ -195,13 +216,13 @@ def test_a_height_between_those_tried_leads_and_wins_where_the_sizes_agree():
     differ), and starts the refinement with the size it needs: not 20 mm (a box 4 mm too tall, which
     the refinement started from and held) and its size (76.6 mm long here, after 8 views)."""
     cfg = TrackConfig()
-    height = HeightEstimate(cfg)
+    height = HeightEstimate(cfg, STEP_MM)
 
     def sizes(x_mm: float) -> dict[float, float]:
         return {h: 80.0 + (16.0 - h) * (0.5 + x_mm / 400.0) for h in (0.0, 5.0, 10.0, 20.0)}
 
     for k in range(cfg.height_vote_views):
-        x = k * cfg.height_vote_step_mm
+        x = k * STEP_MM
         m = _view(x, sizes(x), poses_move_mm=0.1)
         height.add(m, x, 0.0)
         if k == 1:  # two views: not decided yet, led by the height where their sizes agree
@@ -223,9 +244,9 @@ def test_a_height_between_two_tried_wins_once_it_leads_the_others():
     minimum of views on, not after track.height_vote_views (the tests' 8 mm box straight down converged
     after 35 % of its crossing, not 17 %); the refinement moves its height within that bracket."""
     cfg = TrackConfig()
-    height = HeightEstimate(cfg)
+    height = HeightEstimate(cfg, STEP_MM)
     for k in range(cfg.height_vote_min_views):
-        x = k * cfg.height_vote_step_mm
+        x = k * STEP_MM
         height.add(_view(x, {h: 80.0 + (7.5 - h) * (0.5 + x / 400.0) for h in (0.0, 5.0, 10.0, 20.0)}), x, 0.0)
     assert not height.voting and not height.flat
     (length, _, h), _ = height.shape()
@@ -238,9 +259,9 @@ def test_a_box_that_does_not_tell_its_size_agrees_with_no_other():
     and so agree with any (20 mm won, and the height between led with a size of 0 x 0 mm): it counts
     against its height as a box that explains nothing does, and the lead is where the told sizes agree."""
     cfg = TrackConfig()
-    height = HeightEstimate(cfg)
+    height = HeightEstimate(cfg, STEP_MM)
     for k in range(2):
-        x = k * cfg.height_vote_step_mm
+        x = k * STEP_MM
         height.add(_view(x, {h: 80.0 + (16.0 - h) * (0.5 + x / 400.0) for h in (0.0, 5.0, 10.0, 20.0)},
                          untold_mm=(20.0,)), x, 0.0)
     assert height.voting and height.leading_mm < 20.0 - 2.5
@@ -271,9 +292,9 @@ def test_a_height_whose_boxes_need_a_side_brighter_than_the_top_loses_the_vote()
     cfg = TrackConfig()
     both = {0.0: 85.0, 5.0: 80.0, 10.0: 80.0, 20.0: 70.0}
     for outside_mm, winner_mm in (((10.0,), 5.0), ((5.0,), 10.0)):
-        height = HeightEstimate(cfg)
+        height = HeightEstimate(cfg, STEP_MM)
         for k in range(cfg.height_vote_min_views):
-            x = k * cfg.height_vote_step_mm
+            x = k * STEP_MM
             sizes = {h: length + (0.0 if h in (5.0, 10.0) else x / 10.0) for h, length in both.items()}
             height.add(_view(x, sizes, outside_mm=outside_mm), x, 0.0)
         assert not height.voting and height.shape()[0][2] == winner_mm, outside_mm
@@ -289,7 +310,7 @@ def test_a_view_whose_flat_outline_reads_unlike_faces_counts_against_flat():
     sizes = {0.0: 103.0, 5.0: 100.0, 10.0: 97.0, 20.0: 93.0, 50.0: 78.0}
     rms_px = {0.0: 0.04, 5.0: 0.08, 10.0: 0.08, 20.0: 0.08, 50.0: 0.045}
     for uneven, lead_mm in ((False, 0.0), (True, 50.0)):
-        height = HeightEstimate(cfg)
+        height = HeightEstimate(cfg, STEP_MM)
         view = _view(0.0, sizes, rms_px=rms_px)
         trials = tuple(dataclasses.replace(t, faces_uneven=uneven and t.height_mm == 0) for t in view.trials)
         height.add(dataclasses.replace(view, trials=trials), 0.0, 0.0)
@@ -334,9 +355,9 @@ def _vote_views(scene: SceneSpec) -> tuple[list[tuple[float | None, bool, bool, 
 
 def test_a_flat_part_is_voted_flat_and_measured_as_flat():
     cfg = TrackConfig()
-    height = HeightEstimate(cfg)
+    height = HeightEstimate(cfg, STEP_MM)
     for k in range(cfg.height_vote_min_views):
-        x = k * cfg.height_vote_step_mm
+        x = k * STEP_MM
         height.add(_view(x, _sizes(x, 0.0), flat_length_mm=80.0), x, 0.0)
     assert height.flat and height.converged and height.height_mm == 0.0
     m = _view(200.0, _sizes(200.0, 0.0), flat_length_mm=80.25)
@@ -344,9 +365,9 @@ def test_a_flat_part_is_voted_flat_and_measured_as_flat():
 
 
 def _voted_flat(cfg: TrackConfig) -> HeightEstimate:
-    height = HeightEstimate(cfg)
+    height = HeightEstimate(cfg, STEP_MM)
     for k in range(cfg.height_vote_min_views):
-        x = k * cfg.height_vote_step_mm
+        x = k * STEP_MM
         height.add(_view(x, _sizes(x, 0.0)), x, 0.0)
     assert height.flat and height.converged
     return height
@@ -382,7 +403,7 @@ def test_a_part_found_flat_is_voted_again_without_flat_once_it_grows_as_a_box(gr
     assert k + 1 >= cfg.flat_check_views and height.voting and not height.converged
     assert height.leading_mm is not None and height.leading_mm > 0.0
     for j in range(cfg.height_vote_views):
-        x = 300.0 + j * cfg.height_vote_step_mm
+        x = 300.0 + j * STEP_MM
         height.add(_view(x, _sizes(x, 0.0)), x, 0.0)
         assert not height.flat and height.height_mm > 0.0
 
@@ -471,9 +492,9 @@ def test_a_thin_box_its_vote_found_flat_is_voted_again_once_its_sizes_grow_as_a_
 def _voted_20_mm(cfg: TrackConfig | None = None) -> tuple[TrackConfig, HeightEstimate]:
     """A part 20 mm tall voted on by as few views as decide it: now refined."""
     cfg = cfg or TrackConfig()
-    height = HeightEstimate(cfg)
+    height = HeightEstimate(cfg, STEP_MM)
     for k in range(cfg.height_vote_min_views):
-        x = k * cfg.height_vote_step_mm
+        x = k * STEP_MM
         height.add(_view(x, _sizes(x, 20.0)), x, 0.0)
     return cfg, height
 
@@ -509,15 +530,15 @@ def test_views_between_the_votes_refine_the_height_once_the_vote_decides(told_fl
     views fitted at the estimate decide when it has converged. (They tell 20 mm + this many floors,
     track.view_height_sigma_mm: each counts no surer than that.)"""
     cfg = TrackConfig()
-    height = HeightEstimate(cfg)
+    height = HeightEstimate(cfg, STEP_MM)
     told_mm = 20.0 + told_floors * cfg.view_height_sigma_mm
     between = _refining_view(told_mm)
     for k in range(cfg.height_vote_min_views):
-        x = k * cfg.height_vote_step_mm
+        x = k * STEP_MM
         height.add(_view(x, _sizes(x, 20.0), rms_px=_FITS_BEST_AT_20), x, 0.0)
         if height.voting:
             for _ in range(2):
-                height.add(between, x + cfg.height_vote_step_mm / 2, 0.0)
+                height.add(between, x + STEP_MM / 2, 0.0)
                 assert height.voting and height.leading_mm == 20.0  # kept, not voted with
     assert not height.voting
     # Without them the estimate would start at the vote's 20 mm, no view yet refining it.
@@ -540,12 +561,12 @@ def test_the_vote_s_own_views_refine_the_height_too_once_it_decides():
     after the first third of their crossing, 2 now; random scene 10's 20 mm box at 10 deg after 39 %
     and 0.53 mm off, now 12 % and 0.23)."""
     cfg = TrackConfig()
-    height = HeightEstimate(cfg)
+    height = HeightEstimate(cfg, STEP_MM)
     told_mm = 20.0 + 0.8 * cfg.view_height_sigma_mm
     info = np.diag([1e4, 1e4, 1e4])
     fitted_at = [20.0, 20.0, 10.0]  # the last from a height the vote does not decide on
     for k in range(cfg.height_vote_min_views):
-        x = k * cfg.height_vote_step_mm
+        x = k * STEP_MM
         view = dataclasses.replace(_view(x, _sizes(x, 20.0), rms_px=_FITS_BEST_AT_20), shape_info=info,
                        shape_vec=info @ np.array([80.0, 50.0, told_mm]), shape_at_mm=fitted_at[k])
         height.add(view, x, 0.0)
@@ -564,13 +585,13 @@ def test_views_between_the_votes_fitted_at_another_height_are_left_out():
     (Track._learn_shades): one fitted at a height the vote's start does not allow (beyond its sigma,
     HeightEstimate.lead_sigma_mm) would tell another box's shape, and is not taken."""
     cfg = TrackConfig()
-    height = HeightEstimate(cfg)
+    height = HeightEstimate(cfg, STEP_MM)
     x = 0.0
     height.add(_view(x, _sizes(x, 20.0), rms_px={0.0: 0.06, 10.0: 0.06, 20.0: 0.06}), x, 0.0)  # 5 mm fits it best
     assert height.leading_mm == 5.0
-    height.add(_refining_view(20.6), x + cfg.height_vote_step_mm / 2, 0.0)
+    height.add(_refining_view(20.6), x + STEP_MM / 2, 0.0)
     for k in range(1, cfg.height_vote_views):
-        x = k * cfg.height_vote_step_mm
+        x = k * STEP_MM
         height.add(_view(x, _sizes(x, 20.0)), x, 0.0)
         if not height.voting:
             break
@@ -845,9 +866,10 @@ def test_flat_parts_on_a_textured_moving_belt_keep_their_tracks_and_flat_poses()
 
 def test_a_young_track_votes_only_with_views_that_count():
     """A vote fits a box at every height: a young track (its size not settled yet) is known to the
-    measurement for its vote too, so its views vote only once the part has moved track.height_vote_step_mm
-    since its last vote (10 mm per frame here: never two frames running); before, each of its first
-    frames voted and all but the first were thrown away (three frames running on this scene)."""
+    measurement for its vote too, so its views vote only once the part has moved the vote's step (a
+    track.height_vote_step_mm, 40 mm here) since its last vote (10 mm
+    per frame here: never two frames running); before, each of its first frames voted and all but the
+    first were thrown away (three frames running on this scene)."""
     scene = _box_scene(0.0, 0.0)
     renderer, frames = rendered(scene)
     pipeline = Pipeline(renderer.calibration, TrackerConfig(measure=MeasureConfig(estimate_height=True)))

@@ -24,6 +24,9 @@ from tracker.shades import ShadeEstimate
 from tracker.synthetic import _SIDE_SHADE, CameraSpec, PartSpec, SceneSpec
 from tracker.track import Track
 
+# How far apart the views that vote are, in the tracks these tests feed views by hand.
+_STEP_MM = 40.0
+
 
 def _prior(shades: ShadeEstimate) -> ShadePrior | None:
     """What the track lends a fit that sees the faces its first view saw (None: nothing told yet)."""
@@ -325,9 +328,9 @@ def test_the_view_that_decides_a_vote_for_another_height_than_its_box_tells_no_s
     cfg = TrackConfig()
     told = ViewShades((0.7, 0.5), (0.05**2, 0.05**2))
     for last_rms, learnt in (({10.0: 0.06}, False), ({5.0: 0.06}, True)):
-        views = [_vote_view(k * cfg.height_vote_step_mm, {5.0: 0.0505}, told) for k in range(7)]
-        views.append(_vote_view(7 * cfg.height_vote_step_mm, last_rms, told))
-        track = Track(1, views[0], 0, cfg, estimating_height=True)
+        views = [_vote_view(k * _STEP_MM, {5.0: 0.0505}, told) for k in range(7)]
+        views.append(_vote_view(7 * _STEP_MM, last_rms, told))
+        track = Track(1, views[0], 0, cfg, height_vote_step_mm=_STEP_MM)
         for k, view in enumerate(views[1:], start=1):
             assert track.height.voting and track.height.leading_mm == 10.0, k
             track.update(view, cfg)
@@ -345,12 +348,12 @@ def test_the_view_that_decides_a_vote_tells_its_shades_if_its_box_is_near_the_he
     told = ViewShades((0.7, 0.5), (0.05**2, 0.05**2))
 
     def view(k: int, height_mm: float) -> Measurement:
-        x = k * cfg.height_vote_step_mm
+        x = k * _STEP_MM
         sizes = {h: 80.0 + (height_mm - h) * (0.5 + x / 400.0) for h in (0.0, 5.0, 10.0, 20.0, 40.0)}
         return _made_up_view(x, sizes, view_shades=told)
 
     for last_mm, voted_mm, learnt in ((10.3, 10.5, True), (10.5, 11.3, False)):
-        track = Track(1, view(0, 10.2), 0, cfg, estimating_height=True)
+        track = Track(1, view(0, 10.2), 0, cfg, height_vote_step_mm=_STEP_MM)
         track.update(view(1, 10.2), cfg)
         assert track.height.leading_mm == pytest.approx(10.2)
         track.update(view(2, last_mm), cfg)

@@ -89,11 +89,11 @@ def test_twenty_clients_at_once_and_nothing_but_reading(live):
     assert _get(live + "nothing-here")[0] == 404
 
 
-def _chromium(url: str, *args: str) -> subprocess.CompletedProcess:
+def _chromium(url: str, *args: str, budget_ms: int = 3000) -> subprocess.CompletedProcess:
     profile = tempfile.mkdtemp(prefix="tracker-chromium-")
     cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
            "--disable-background-networking", "--disable-component-update", "--disable-sync",
-           f"--user-data-dir={profile}", "--window-size=1400,900", "--virtual-time-budget=3000", *args, url]
+           f"--user-data-dir={profile}", "--window-size=1400,900", f"--virtual-time-budget={budget_ms}", *args, url]
     try:
         return subprocess.run(cmd, capture_output=True, text=True, timeout=60)
     finally:
@@ -110,7 +110,13 @@ def browser():
 
 
 def test_in_a_real_browser_the_page_fills_its_tables(live, browser):
-    dom = _chromium(live, "--dump-dom").stdout
+    # On a loaded machine (the suite's two workers, a benchmark beside it) the page's first fetch of
+    # /state.json may not have arrived when chromium dumps the page: up to three captures, each allowed
+    # more time.
+    for attempt in range(3):
+        dom = _chromium(live, "--dump-dom", budget_ms=3000 * (attempt + 1)).stdout
+        if "waiting for frames" not in dom:
+            break
     # The page's own script filled the parts table and the health line from /state.json.
     assert 'id="frame">' in dom and "waiting for frames" not in dom, dom[:2000]
     rows = dom.split("<tbody>")[1].split("</tbody>")[0]
@@ -121,11 +127,11 @@ def test_in_a_real_browser_the_screenshot_shows_the_image_with_overlays(live, br
     # The page fetches its image after its script runs: on a loaded machine the first screenshot may
     # come before it has arrived (the virtual time budget is the page's, not the network's), or
     # chromium may write none at all (once, with benchmarks beside the suite), so up to three real
-    # captures are taken; a page that never shows the outline fails all three.
+    # captures are taken, each allowed more time; a page that never shows the outline fails all three.
     outline, failures = 0, []
     for attempt in range(3):
         shot = tmp_path / f"page{attempt}.png"
-        run = _chromium(live, f"--screenshot={shot}")
+        run = _chromium(live, f"--screenshot={shot}", budget_ms=3000 * (attempt + 1))
         image = cv2.imread(str(shot), cv2.IMREAD_COLOR)
         if image is None:
             failures.append(f"no screenshot (exit {run.returncode}): {run.stderr[-300:]}")

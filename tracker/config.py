@@ -253,12 +253,18 @@ class TrackConfig:
     shade_view_max_sigma: float = 0.15
     shade_memory_views: float = 100.0
     opposite_shade_sigma: float = 0.1
-    # --part-height auto (tracker/height.py). The vote: views this far apart along the part's path
-    # (mm) fitted at each height of measure.height_starts_mm, their sizes expected to agree as well as
-    # each view decides them, and no better than height_vote_size_sigma_mm (1 sigma); no view adds
-    # more than height_vote_view_cap to a height's score, and how much worse a height explains the
-    # edges counts height_vote_cost_weight (a box fit stopped short costs as much as a wrong height).
+    # --part-height auto (tracker/height.py). The vote: views height_vote_step_mm apart along the part's
+    # path, or on a view smaller than the renderer's default camera's (690 mm: the square root of the
+    # belt area it sees) height_vote_step_fraction of its size (a part crossing a camera's view of 400
+    # x 300 mm voted at 40 mm steps decided after 41 % of its crossing, at 20 mm after 19 %; larger
+    # views keep 40 mm: at 0.058 of theirs, 47-58 mm, 2 of bench/heights_random.py's first 60 scenes
+    # went from 9-12 % of their crossing to 40 %). Each is fitted at each height of
+    # measure.height_starts_mm, their sizes expected to agree as well as each view decides them, and no
+    # better than height_vote_size_sigma_mm (1 sigma); no view adds more than height_vote_view_cap to a
+    # height's score, and how much worse a height explains the edges counts height_vote_cost_weight (a
+    # box fit stopped short costs as much as a wrong height).
     height_vote_step_mm: float = 40.0
+    height_vote_step_fraction: float = 0.058
     height_vote_size_sigma_mm: float = 0.1
     height_vote_view_cap: float = 25.0
     height_vote_cost_weight: float = 0.2

@@ -6,8 +6,9 @@ silhouette changes as the part moves: a wrong height fits each view only with an
 size it needs changes across the view, while the right height fits every view with the part's one
 size. The estimate has two stages.
 
-1. **Vote.** Views the camera saw ``track.height_vote_step_mm`` apart (in the world frame, also on a
-   moving belt whose parts are tracked in its own) along the part's path are fitted as a box at
+1. **Vote.** Views the camera saw ``vote_step_mm`` apart (``track.height_vote_step_mm``, less on a small
+   view; in the world frame, also on a moving belt whose parts are tracked in its own) along
+   the part's path are fitted as a box at
    every height of ``measure.height_starts_mm``, its size free (``HeightTrial``). Each height scores,
    over the views, how much its sizes scatter (what decides it; no view adds more than
    ``track.height_vote_view_cap``) and how much worse its boxes explain the edges than the view's best
@@ -112,8 +113,13 @@ class HeightTrial:
 class HeightEstimate:
     """What a track's views tell of its part's height (and, once voted, its size)."""
 
-    def __init__(self, cfg: TrackConfig) -> None:
+    def __init__(self, cfg: TrackConfig, vote_step_mm: float) -> None:
+        """``vote_step_mm``: how far apart along the part's path views vote (track.height_vote_step_mm, less
+        on a small view: see Pipeline)."""
+        if not vote_step_mm > 0:
+            raise ValueError(f"height vote: expected a step > 0 mm between the views that vote, got {vote_step_mm}")
         self._cfg = cfg
+        self.vote_step_mm = vote_step_mm
         # No view is surer than the model is right: each counts with at least this uncertainty (mm^2).
         self._view_floor_mm2 = np.diag([cfg.view_size_sigma_mm**2] * 2 + [cfg.view_height_sigma_mm**2])
         # The height told until a view leads the vote: 0 for a new part; one voted on again keeps the
@@ -168,7 +174,7 @@ class HeightEstimate:
     def wants_vote(self, x_mm: float, y_mm: float) -> bool:
         """Whether a view of the part seen at (x, y) (world frame) would vote: the first, or far enough
         from the last."""
-        return self.voting and vote_due(self.last_vote_mm, x_mm, y_mm, self._cfg.height_vote_step_mm)
+        return self.voting and vote_due(self.last_vote_mm, x_mm, y_mm, self.vote_step_mm)
 
     @property
     def wants_refine(self) -> bool:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import time
 
 import cv2
@@ -82,9 +83,14 @@ class Pipeline:
         # measured, parts are tracked on the belt, where a part riding it stands still through the
         # belt's stops, slow phases and duplicate frames; without it the offset stays zero.
         self._belt_offset_mm = np.zeros(2)
+        # With --part-height auto, a part's views vote on its height track.height_vote_step_mm apart, closer
+        # on a small view (a fraction of the square root of the belt area it sees): a part crossing it
+        # decides as early in its crossing as one crossing a larger view.
+        track = self.config.track
+        vote_step_mm = (min(track.height_vote_step_mm, track.height_vote_step_fraction * math.sqrt(abs(
+            cv2.contourArea(outline)))) if self.config.measure.estimate_height else None)
         self.tracker = Tracker(self.config.track, lambda x, y: cv2.pointPolygonTest(
-            outline, (x + self._belt_offset_mm[0], y + self._belt_offset_mm[1]), False) >= 0,
-            self.config.measure.estimate_height)
+            outline, (x + self._belt_offset_mm[0], y + self._belt_offset_mm[1]), False) >= 0, vote_step_mm)
         # Time spent per stage on the last frame (ns); for the status line and the benchmark only.
         self.stage_ns = dict.fromkeys(STAGES, 0)
 

@@ -23,10 +23,12 @@ from tracker.shades import FaceShades, ShadeEstimate
 
 class Track:
     def __init__(self, track_id: int, m: Measurement, t_ns: int, cfg: TrackConfig,
-                 estimating_height: bool = False) -> None:
+                 height_vote_step_mm: float | None = None) -> None:
+        """``height_vote_step_mm``: with --part-height auto, how far apart the views that vote on its
+        height are (see HeightEstimate; None: its height is given, or none)."""
         self.id = track_id
         # --part-height auto: what its views tell of its height (None: heights given, or none).
-        self.height = HeightEstimate(cfg) if estimating_height else None
+        self.height = None if height_vote_step_mm is None else HeightEstimate(cfg, height_vote_step_mm)
         # With measure.learn_shades: its side shades as its views tell them (--part-height auto: its
         # boxes' at the height it is estimated or voted to have, see _learn_shades).
         self.shades: ShadeEstimate | None = None
@@ -118,7 +120,7 @@ class Track:
         self.odd_size_since_ns = None
         # Its views so far were of another size (a sliver), and so told another shape.
         if self.height is not None:
-            self.height = HeightEstimate(cfg)
+            self.height = HeightEstimate(cfg, self.height.vote_step_mm)
         self.shades = None
 
     def settled(self, cfg: TrackConfig) -> bool:
@@ -227,7 +229,7 @@ class Track:
             return KnownPart(float(x[X]), float(x[Y]), size, flat=True)
         if self.height.voting:
             return KnownPart(float(x[X]), float(x[Y]), size, last_vote_mm=self.height.last_vote_mm,
-                             vote_step_mm=cfg.height_vote_step_mm, leading_mm=self.height.leading_mm,
+                             vote_step_mm=self.height.vote_step_mm, leading_mm=self.height.leading_mm,
                              shades=self._lent_shades())
         # Being refined: the size and height as the track's views tell them together.
         (length, width, _), cov = self.height.shape()
@@ -293,9 +295,11 @@ class Tracker:
     """Greedy nearest-neighbour association of measurements to Kalman tracks."""
 
     def __init__(self, config: TrackConfig, in_view: Callable[[float, float], bool] | None = None,
-                 estimating_height: bool = False) -> None:
+                 height_vote_step_mm: float | None = None) -> None:
+        """``height_vote_step_mm``: with --part-height auto, how far apart the views that vote on a part's
+        height are (see HeightEstimate; None: heights given, or none)."""
         self.config = config
-        self._estimating_height = estimating_height
+        self._vote_step_mm = height_vote_step_mm
         # Whether a belt point is inside the camera's view: a track predicted out of view ends.
         self._in_view = in_view or (lambda x, y: True)
         self.tracks: list[Track] = []
@@ -379,7 +383,7 @@ class Tracker:
             alive.append(track)
         for mi, m in enumerate(measurements):
             if mi not in used and not m.clipped and not self._inside_known(m, alive, measurements):
-                track = Track(self._next_id, m, t_ns, cfg, self._estimating_height)
+                track = Track(self._next_id, m, t_ns, cfg, self._vote_step_mm)
                 self._next_id += 1
                 alive.append(track)
                 out.append(track.output(m))
