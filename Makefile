@@ -38,6 +38,8 @@ bench: $(STAMP)
 	$(BIN)/python bench/heights_random.py --height 3 --scenes 24
 	$(BIN)/python bench/heights_random.py --side-light --scenes 60
 	$(BIN)/python bench/heights_random.py --shadow --scenes 60
+	$(BIN)/python bench/heights_random.py --near --scenes 30
+	$(BIN)/python bench/heights_random.py --two-parts --scenes 30
 	$(BIN)/python bench/issue_scenes.py
 	$(BIN)/python bench/view_heights.py
 
