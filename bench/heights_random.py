@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections import Counter
 from dataclasses import replace
@@ -96,6 +97,7 @@ def scene(k: int, any_height: bool = False, tilt_deg: float | None = None, dark:
         levels = np.random.default_rng(7000 + k)
         part = replace(part, intensity=float(levels.uniform(20, 60)))
         belt_level = float(levels.uniform(130, 180))
+    fps = 30.0
     parts, extra_frames = (part,), 0
     if two_parts:
         # Side by side across the belt, each about halfway from the view's middle to its edge, riding along.
@@ -105,9 +107,11 @@ def scene(k: int, any_height: bool = False, tilt_deg: float | None = None, dark:
         second = replace(part, length_mm=float(other.uniform(60, 100)), width_mm=float(other.uniform(35, 55)),
                          height_mm=HEIGHTS_MM[(k // 3 + 2) % len(HEIGHTS_MM)], y0_mm=0.5 * half_across,
                          x0_mm=part.x0_mm - float(other.uniform(20, 120)), vy_mm_s=0.0,
-                         angle0_deg=float(other.uniform(-90, 90)), intensity=float(other.uniform(150, 220)))
-        parts, extra_frames = (first, second), 12
-    fps = 30.0
+                         angle0_deg=float(other.uniform(-90, 90)),
+                         intensity=float(other.uniform(20, 60) if dark else other.uniform(150, 220)))
+        # Until the second, behind the first and perhaps longer, has crossed the view too.
+        behind_mm = part.x0_mm - second.x0_mm + max(0.0, second.length_mm - length)
+        parts, extra_frames = (first, second), math.ceil(behind_mm / speed * fps)
     belt = {}
     if textured:
         belt = dict(belt_texture=float(np.random.default_rng(8000 + k).uniform(5, 15)), belt_texture_period_mm=6.0,
@@ -236,6 +240,8 @@ def main(argv: list[str] | None = None) -> int:
                              "is not both parts')")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
+    if args.two_parts and args.height is not None:
+        parser.error("--height: one height for both of --two-parts' parts would not be theirs")
     with Pool(2) as pool:
         rows = pool.map(partial(measure_scene, any_height=args.any_height, tilt_deg=args.tilt, dark=args.dark,
                                  textured=args.textured, height_mm=args.height, side_light=args.side_light,
