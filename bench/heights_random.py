@@ -143,13 +143,7 @@ def measure_scene(k: int, any_height: bool = False, tilt_deg: float | None = Non
         return _measure_parts(k, spec, textured)
     if height_mm is not None:
         spec = replace(spec, parts=(replace(spec.parts[0], height_mm=height_mm),))
-    renderer = Renderer(spec)
-    frames = [renderer.render(i) for i in range(spec.n_frames)]
-    truths = [t for _, t in frames]
-    images = [image for image, _ in frames]
-    segment = None
-    if textured:
-        images, segment = mpeg4_round_trip(images, spec.fps), SegmentConfig(model="textured")
+    images, truths, segment = _rendered(spec, textured)
     part = spec.parts[0]
     row = {"scene": k, "height_mm": part.height_mm, "tilt_deg": spec.camera.tilt_deg,
            "side_contrast": round(part.intensity * 0.65 - spec.belt_level, 1)}
@@ -163,14 +157,20 @@ def measure_scene(k: int, any_height: bool = False, tilt_deg: float | None = Non
     return [row | auto_row(frames_own, part.height_mm)]
 
 
-def _measure_parts(k: int, spec: SceneSpec, textured: bool) -> list[dict]:
-    """Each part's row of a scene of several, with auto."""
+def _rendered(spec: SceneSpec, textured: bool) -> tuple[list, list[dict], SegmentConfig | None]:
+    """``spec``'s frames as measured (on a textured belt through MPEG-4), their truths, and the belt model
+    to measure them with (None: the default)."""
     renderer = Renderer(spec)
     frames = [renderer.render(i) for i in range(spec.n_frames)]
-    truths = [t for _, t in frames]
-    images, segment = [image for image, _ in frames], None
+    images, truths = [image for image, _ in frames], [truth for _, truth in frames]
     if textured:
-        images, segment = mpeg4_round_trip(images, spec.fps), SegmentConfig(model="textured")
+        return mpeg4_round_trip(images, spec.fps), truths, SegmentConfig(model="textured")
+    return images, truths, None
+
+
+def _measure_parts(k: int, spec: SceneSpec, textured: bool) -> list[dict]:
+    """Each part's row of a scene of several, with auto."""
+    images, truths, segment = _rendered(spec, textured)
     poses = poses_of(spec, images, MeasureConfig(estimate_height=True), segment)
     rows = []
     for j, part in enumerate(spec.parts):

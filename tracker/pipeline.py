@@ -87,8 +87,9 @@ class Pipeline:
         # on a small view (a fraction of the square root of the belt area it sees): a part crossing it
         # decides as early in its crossing as one crossing a larger view.
         track = self.config.track
-        vote_step_mm = (min(track.height_vote_step_mm, track.height_vote_step_fraction * math.sqrt(abs(
-            cv2.contourArea(outline)))) if self.config.measure.estimate_height else None)
+        view_size_mm = math.sqrt(cv2.contourArea(outline))
+        vote_step_mm = (min(track.height_vote_step_mm, track.height_vote_step_fraction * view_size_mm)
+                        if self.config.measure.estimate_height else None)
         self.tracker = Tracker(self.config.track, lambda x, y: cv2.pointPolygonTest(
             outline, (x + self._belt_offset_mm[0], y + self._belt_offset_mm[1]), False) >= 0, vote_step_mm)
         # Time spent per stage on the last frame (ns); for the status line and the benchmark only.
