@@ -20,7 +20,7 @@ from tracker.evaluate import evaluate
 from tracker.geometry import Rect
 from tracker.measure import KnownPart, Measurement
 from tracker.pipeline import Pipeline
-from tracker.shades import ShadeEstimate
+from tracker.shades import ShadeEstimate, read_together
 from tracker.synthetic import _SIDE_SHADE, CameraSpec, PartSpec, SceneSpec
 from tracker.track import Track
 
@@ -101,6 +101,35 @@ def test_a_slivers_shade_is_decided_with_the_size_across_views():
         info = 1e4 * (np.outer(end, end) + np.outer(long, long))
         shades.add(ViewShades((0.5, 0.5), (0.05**2, 0.05**2), info=info, vec=info @ truth))
     assert _prior(shades).shades == pytest.approx((0.7, 0.45), abs=1e-3)
+
+
+def test_views_read_together_tell_even_shades_no_view_tells_within_the_bounds():
+    """read_together (the vote's check of a flat part's thin boxes): each view's shades, told or not (a
+    view whose sliver reads as dark as the belt tells no shade to a track, but says so), decided with
+    the size the views share, each face on its own (a flat part's box needs one long face as dark as
+    the belt, the other as bright as the top); a view no surer of a shade alone than the floor given."""
+    views = []
+    for trade, facing in ((2.0, (0.0, 90.0)), (-1.0, (0.0, -90.0)), (0.5, (0.0, 90.0)), (1.5, (0.0, -90.0))):
+        # Its long faces: the one facing +90 deg as dark as the belt, the one opposite as bright as the top.
+        truth = np.array([80.0, 50.0, 0.6, 0.0 if facing[1] > 0 else 1.0])
+        end, long = np.array([1.0, 0.0, 0.0, trade]), np.array([0.0, 1.0, trade, 0.0])
+        info = 1e4 * (np.outer(end, end) + np.outer(long, long))
+        # Each view's own reading untold (outside ShadeBounds.told): what a track would learn nothing from.
+        views.append(ViewShades((0.5, 0.5), (math.inf, math.inf), info=info, vec=info @ truth, facing_deg=facing))
+    shades, sigma = read_together(views, 0.05)
+    # The end faces: only the first's seen (all four views face it); the long faces each its own.
+    assert shades[[0, 2, 3]] == pytest.approx((0.6, 0.0, 1.0), abs=1e-6) and np.all(sigma[[0, 2, 3]] < 0.01), sigma
+    assert math.isnan(shades[1]) and math.isinf(sigma[1])
+    # Two views alone, each of its own long face, tell only their trades of shade and size: no shade.
+    _, two_sigma = read_together(views[:2], 0.05)
+    assert np.all(two_sigma[2:] > 100), two_sigma
+    # A view that tells its shades alone to 0.001 counts as telling them to the floor.
+    sure = 1e6 * np.diag([0.0, 0.0, 1.0, 1.0])
+    _, floor_sigma = read_together([ViewShades((0.2, 0.3), (1e-6, 1e-6), info=sure, vec=sure @ np.ones(4))], 0.05)
+    assert floor_sigma[[0, 2]] == pytest.approx((0.05, 0.05))
+    # A view that shows no side face adds nothing; no view at all tells nothing.
+    nothing, unknown = read_together([ViewShades((0.5, 0.5), (math.inf, math.inf))], 0.05)
+    assert np.all(np.isnan(nothing)) and np.all(np.isinf(unknown))
 
 
 def test_a_track_learns_its_parts_side_shades_from_its_views():

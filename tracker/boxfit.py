@@ -152,6 +152,8 @@ class ViewShades:
     # frame, deg; BoxCamera.facing_deg; None: not said). A lamp to one side lights a face and the one
     # opposite it unalike, and a part crossing the view shows one, then the other (tracker/shades.py).
     facing_deg: tuple[float, float] | None = None
+    # The shades a side may have (ShadeBounds.possible of the part's levels in this view).
+    possible: tuple[float, float] = BRIGHT.possible
 
 
 def predicted_sums(camera: BoxCamera, windows: EdgeWindows, params: np.ndarray, shades: np.ndarray | None = None,
@@ -401,7 +403,7 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
     outside = wide & near & ((own + margin < possible_from) | (own - margin >= possible_to))
     variances[~(variances > 0) | (own < told_from) | (own >= told_to)] = math.inf
     return ViewShades((float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])),
-                      (bool(outside[0]), bool(outside[1])), *joint)
+                      (bool(outside[0]), bool(outside[1])), *joint, possible=bounds.possible)
 
 
 def _swapped(view: ViewShades) -> ViewShades:
@@ -411,7 +413,7 @@ def _swapped(view: ViewShades) -> ViewShades:
     return ViewShades(view.shades[::-1], view.variances[::-1], view.outside[::-1],
                       None if view.info is None else view.info[np.ix_(order, order)],
                       None if view.vec is None else view.vec[order],
-                      None if view.facing_deg is None else view.facing_deg[::-1])
+                      None if view.facing_deg is None else view.facing_deg[::-1], view.possible)
 
 
 def marginalised(normal: np.ndarray, grad: np.ndarray, keep: list[int],

@@ -274,6 +274,11 @@ class TrackConfig:
     height_vote_margin: float = 25.0
     height_vote_min_views: int = 3
     height_vote_views: int = 8
+    # A flat part's thin boxes explain each of its views as well as flat (sides as dark as the belt, or
+    # as bright as the top): no one view tells them apart. A box is no rival of a flat lead once the
+    # vote's views, read together with the size they share, need a side shade this many sigmas beyond
+    # those a side may have (see HeightEstimate._needs_other_sides).
+    height_vote_flat_shade_sigmas: float = 2.0
     # A part's height need not be one of measure.height_starts_mm: between the best height's neighbours
     # (halfway to each) the vote's sizes are interpolated at steps of this (mm), and the height where
     # they agree best leads (see HeightEstimate._between).

@@ -13,9 +13,11 @@ size. The estimate has two stages.
    over the views, how much its sizes scatter (what decides it; no view adds more than
    ``track.height_vote_view_cap``) and how much worse its boxes explain the edges than the view's best
    height (weighted ``track.height_vote_cost_weight``: a box fit stopped short costs as much as a wrong
-   height). The best height wins once it leads by ``track.height_vote_margin`` every height tried that
-   does not bracket the vote's lead (see _rivals; from ``track.height_vote_min_views`` views on), or
-   after ``track.height_vote_views`` views. A winner of 0
+   height; a box's two side shades, which fit some of the noise, are charged as Akaike's criterion
+   charges parameters). The best height wins once it leads by ``track.height_vote_margin`` every height
+   tried that does not bracket the vote's lead (see _rivals; from ``track.height_vote_min_views`` views
+   on), or after ``track.height_vote_views`` views; flat, every box whose sides its views read together
+   as a side's (not as dark as the belt nor as bright as the top: see _needs_other_sides). A winner of 0
    makes the part flat: from then on it is measured as flat, exactly as a flat part always was,
    unless its sizes grow across the view as a box's silhouette does (``track.flat_check_*``, see
    _check_flat): then flat is refuted and the vote goes on without it. A
@@ -58,6 +60,7 @@ import numpy as np
 from tracker.boxfit import ViewShades, marginalised, widened
 from tracker.config import TrackConfig
 from tracker.geometry import Rect, wrap_angle_deg
+from tracker.shades import read_together
 
 # A view's disagreement with the estimate is a chi-square of this many degrees of freedom (length,
 # width, height), whose expectation this is.
@@ -67,6 +70,10 @@ _SHAPE_DOF = 3.0
 # (a stopped belt) tells a view every few frames for as long as it stays: judging them all again would
 # cost more with every view. A part crossing the view tells far fewer (9-19 in random scenes 51, 72, 96).
 _JUDGED_VIEWS = 64
+# The parameters a box's fit has that flat's has not: its two side shades (end faces, long faces).
+_SHADES = 2
+# Heights closer than this (mm) are one height, apart by a rounding error only.
+_ROUNDING_MM = 1e-9
 
 if TYPE_CHECKING:
     from tracker.measure import Measurement
@@ -138,6 +145,7 @@ class HeightEstimate:
         self._size_vars: list[np.ndarray] = []
         self._fitted: list[np.ndarray] = []  # (K,) whether each height's box explained the view
         self._another: list[np.ndarray] = []  # (K,) whether it did only as another shape would
+        self._shades: list[tuple[ViewShades | None, ...]] = []  # (K,) what it tells of each box's side shades
         self._last_vote_mm: np.ndarray | None = None  # where the part was at the last vote
         self._between_votes: list[tuple[float, np.ndarray, np.ndarray]] = []  # what views between votes told (see add)
         self._lead: tuple[float, np.ndarray] | None = None  # the leading height and its size (see _between)
@@ -327,8 +335,13 @@ class HeightEstimate:
         trials = tuple(by_height[h] for h in self.heights_mm)
         self._fitted.append(np.array([t.fitted for t in trials]))
         self._another.append(np.array([t.another_shape for t in trials]))
-        mse = np.array([t.rms_px**2 for t in trials])
+        self._shades.append(tuple(t.shades for t in trials))
         windows = min(t.windows for t in trials)
+        # A box's fit has two parameters more than flat's (its side shades), which fit some of any view's
+        # noise: each costs it two windows' worth of its mean square, as Akaike's criterion charges (a
+        # flat part at 10 deg, its 5 mm box's sides as dark as the belt: RMS 0.034 px each, the box led
+        # its first view by 0.6 and posed it 2 mm off until the third).
+        mse = np.array([t.rms_px**2 * (1.0 + (2.0 * _SHADES / windows if t.height_mm > 0 else 0.0)) for t in trials])
         # How much worse each height explains this view than its best, in windows: a view whose edges
         # no height explains (a hand over the part) counts no more than one that one height explains.
         self._excess.append(np.minimum(windows * (mse / max(float(mse.min()), 1e-12) - 1.0), windows))
@@ -353,13 +366,35 @@ class HeightEstimate:
         track.height_vote_margin to win: all but the two that bracket it (its neighbours, where it is one
         of them), and flat's unless flat leads (a part found flat is measured flat unless refuted, while the
         refinement moves a box's height within its bracket: a part between two heights tried, 8 mm, fits
-        both alike and their scores kept within the margin of each other for 6 views)."""
+        both alike and their scores kept within the margin of each other for 6 views). A flat lead's
+        rivals are the boxes whose sides its views read together as a side's (see _needs_other_sides)."""
         heights = np.array(self.heights_mm)
         below, above = heights[heights < height_mm], heights[heights > height_mm]
         low = below.max() if below.size else -np.inf
         high = above.min() if above.size else np.inf
         apart = (heights < low) | (heights > high) | ((heights == 0) != (height_mm == 0))
+        if height_mm == 0:
+            # Read only for the boxes within the margin: those beyond it are led by it anyway.
+            near = scores < scores.min() + self._cfg.height_vote_margin
+            apart &= ~np.array([h > 0 and near[k] and self._needs_other_sides(k) for k, h in enumerate(heights)])
         return scores[apart & (heights != height_mm)]
+
+    def _needs_other_sides(self, k: int) -> bool:
+        """Whether the vote's views of the ``k``-th height's box, read together with the size they share
+        (each face on its own), need a side shade no side has (track.height_vote_flat_shade_sigmas beyond
+        ShadeBounds.possible). A flat part's thin boxes explain each view as well as flat, a long face
+        as dark as the belt, the one opposite or an end as bright as the top, which one view does not
+        tell from a thin side: bench/heights_random.py scene 106, flat at 10 deg, led its 5 mm box by
+        14-20 over 4-8 views (the margin 25), and flat won only after its 8 views, 53 % of its crossing;
+        that box's ends and long faces read together 0.07 +- 0.03 and 0.04 +- 0.02 over its first three
+        views. A real part's thin sides lie within (the random scenes' 5 mm boxes read 0.28-0.82 so)."""
+        views = [view[k] for view in self._shades if view[k] is not None]
+        if not views:
+            return False
+        shades, sigma = read_together(views, self._cfg.shade_view_min_sigma)
+        margin = self._cfg.height_vote_flat_shade_sigmas * sigma
+        low, high = views[-1].possible
+        return bool(np.any((shades + margin < low) | (shades - margin >= high)))
 
     def _scores(self) -> np.ndarray:
         """Each height's score (lower is better), in units of a chi-square; flat's none once refuted."""
@@ -404,8 +439,11 @@ class HeightEstimate:
             return 0.0, self._sizes_weighed()[2][k]
         lo = 0.5 * (heights[max(k - 1, 0)] + heights[k])
         hi = 0.5 * (heights[min(k + 1, len(heights) - 1)] + heights[k])
-        # The height tried itself among them, whatever the step.
-        at = np.union1d(np.arange(lo, hi, self._cfg.height_vote_resolution_mm), [heights[k], hi])
+        # The height tried itself among them, whatever the step, and no step a rounding error from it (7.5
+        # + 25 x 0.1 is 9.999999999999991: where the scores tie, the first would lead, not 10).
+        steps = np.arange(lo, hi, self._cfg.height_vote_resolution_mm)
+        apart = np.abs(steps - heights[k]) > _ROUNDING_MM
+        at = np.union1d(steps[apart], [heights[k], hi])
         sizes, variances = np.array(self._sizes), np.array(self._size_vars)
         told = self._told()
         if not told.any():

@@ -28,6 +28,10 @@ import numpy as np
 from tracker.boxfit import ShadePrior, ViewShades, marginalised
 from tracker.config import TrackConfig
 
+# The information (1/mm^2, 1/shade^2) read_together adds to every parameter: nothing a view tells, but a
+# combination no view tells gets a variance of 1e9 rather than none.
+_UNTOLD = 1e-9
+
 
 @dataclass(frozen=True)
 class FaceShades:
@@ -142,3 +146,42 @@ def _told(view: ViewShades, cfg: TrackConfig) -> tuple[np.ndarray, np.ndarray]:
     full, full_vec = np.zeros((4, 4)), np.zeros(4)
     full[np.ix_(sub, sub)], full_vec[sub] = info * scale, vec * scale
     return full, full_vec
+
+
+def read_together(views: list[ViewShades], min_sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """The side shades ``views`` of one box tell together, with the size they share: each end face's,
+    then each long face's (as FaceShades orders them, the first view's facing first), and their 1 sigma
+    (inf: no view shows that face). Every shade a view shows counts, told or not (a sliver's reading as
+    dark as the belt, or as bright as the top, is what this is for), each view no surer of a shade alone
+    (its size unknown) than ``min_sigma``, as a track learns them."""
+    info, vec = np.zeros((6, 6)), np.zeros(6)
+    reference = next((view.facing_deg for view in views if view.facing_deg is not None), None)
+    for view in views:
+        if view.info is None:
+            continue
+        shown = np.diag(view.info)[2:] > 0
+        if not shown.any():
+            continue
+        sub = [0, 1, *(2 + np.nonzero(shown)[0])]
+        told, told_vec = marginalised(view.info, view.vec, sub, [i for i in range(4) if i not in sub])
+        alone = np.diag(_inverse(told))[2:]
+        scale = min(1.0, float(np.min(alone / min_sigma**2)))
+        end, long = _slots(view.facing_deg, reference)
+        at = np.array([0, 1, 2 + end, 4 + long])[sub]
+        info[np.ix_(at, at)] += told * scale
+        vec[at] += told_vec * scale
+    shades, sigma = np.full(4, math.nan), np.full(4, math.inf)
+    shown = np.diag(info)[2:] > 0
+    if shown.any():
+        use = [0, 1, *(2 + np.nonzero(shown)[0])]
+        cov = _inverse(info[np.ix_(use, use)])
+        shades[shown] = (cov @ vec[use])[2:]
+        sigma[shown] = np.sqrt(np.maximum(np.diag(cov)[2:], 0.0))
+    return shades, sigma
+
+
+def _inverse(info: np.ndarray) -> np.ndarray:
+    """The covariance of an information matrix that may leave some combination untold (one view's sliver:
+    its shade and the size beside it only as one sum): that combination's variance vast, not the
+    pseudo-inverse's small one."""
+    return np.linalg.inv(info + _UNTOLD * np.eye(len(info)))
