@@ -134,9 +134,9 @@ def test_a_flat_part_its_thinnest_box_explains_as_well_is_decided_flat_early():
     led by less than the margin, and won only after the vote's 8 views (53 % of its crossing, settling
     meanwhile); the 5 mm box's sides read together (tracker/shades.read_together) are the belt's, which
     no side is: decided flat after 15 %. And posed flat from the first view: its box, whose side shades
-    fit some of the view's noise, led that view by a hair and posed it 2 mm off until the third (the
+    fit some of the view's noise, led that view by a hair and posed it 2 mm off for 3 frames (the
     centroid 1.02 mm off on average before convergence), before a box's two shades were charged as
-    Akaike's criterion charges parameters (HeightEstimate._vote)."""
+    Akaike's criterion charges parameters (height._charged_ms_px2)."""
     cam = CameraSpec(width=480, height=360, focal_px=514.2, principal_offset_px=(1.0, 4.7), tilt_deg=10.0,
                      yaw_deg=-8.5, height_mm=654.2)
     part = PartSpec(91.1, 63.1, 0.0, -344.4, 11.1, 66.4, 391.5, 19.5, omega_deg_s=-7.6, intensity=207.4)

@@ -132,6 +132,32 @@ def test_views_read_together_tell_even_shades_no_view_tells_within_the_bounds():
     assert np.all(np.isnan(nothing)) and np.all(np.isinf(unknown))
 
 
+def test_views_read_together_place_a_view_of_one_kind_of_face_and_ignore_what_is_not_finite():
+    """A view that shows only a long face (straight along the part) adds to that face's slot alone, as the
+    face it saw faces; one whose information is not finite tells nothing; a view whose sliver's shade and
+    size its information holds only as one sum, however large, gives a vast variance, never a negative
+    one (a rounding error would else subtract the view)."""
+    truth = np.array([80.0, 50.0, 0.6, 0.2])
+    both = np.array([[1.0, 0.0, 1.5, 0.0], [0.0, 1.0, 0.0, 1.5], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+    first = ViewShades((0.5, 0.5), (0.05**2, 0.05**2), info=100.0 * both.T @ both, vec=100.0 * both.T @ both @ truth,
+                       facing_deg=(0.0, 90.0))
+    long_row = np.array([0.0, 1.0, 0.0, 2.0])
+    only_long = 100.0 * np.outer(long_row, long_row) + np.diag([0.0, 0.0, 0.0, 100.0])
+    seen = np.array([80.0, 50.0, 0.0, 0.9])  # the long face opposite the first view's: as bright as 0.9
+    other_long = ViewShades((0.5, 0.5), (math.inf, 0.1**2), info=only_long, vec=only_long @ seen,
+                            facing_deg=(0.0, -90.0))
+    shades, sigma = read_together([first, other_long], 0.05)
+    assert shades[0] == pytest.approx(0.6, abs=1e-6) and shades[2] == pytest.approx(0.2, abs=1e-6)
+    assert shades[3] == pytest.approx(0.9, abs=1e-6) and math.isinf(sigma[1]) and np.isfinite(sigma[3])
+    poisoned = replace(other_long, vec=np.array([np.nan, 0.0, 0.0, 0.0]))
+    assert np.allclose(read_together([first, poisoned], 0.05)[0][[0, 2]], (0.6, 0.2)), "a view not finite counted"
+    trade = np.array([1.0, 0.0, 2.0, 0.0])
+    huge = 1e7 * np.outer(trade, trade)
+    huge[2, 2] -= 1e-6  # rounding: a hair short of semi-definite
+    _, alone = read_together([ViewShades((0.5, 0.5), (math.inf, math.inf), info=huge, vec=huge @ truth)], 0.05)
+    assert alone[0] > 10, alone  # a shade from 0 to 1.5: nothing told
+
+
 def test_a_track_learns_its_parts_side_shades_from_its_views():
     """A 20 mm box crossing a tilted camera's view, its height estimated: the shades its track learns are
     the rendered ones (each side face's contrast as a fraction of the top's, against the belt's level

@@ -413,7 +413,7 @@ def _swapped(view: ViewShades) -> ViewShades:
     return ViewShades(view.shades[::-1], view.variances[::-1], view.outside[::-1],
                       None if view.info is None else view.info[np.ix_(order, order)],
                       None if view.vec is None else view.vec[order],
-                      None if view.facing_deg is None else view.facing_deg[::-1], view.possible)
+                      None if view.facing_deg is None else view.facing_deg[::-1], possible=view.possible)
 
 
 def marginalised(normal: np.ndarray, grad: np.ndarray, keep: list[int],

@@ -277,7 +277,8 @@ class TrackConfig:
     # A flat part's thin boxes explain each of its views as well as flat (sides as dark as the belt, or
     # as bright as the top): no one view tells them apart. A box is no rival of a flat lead once the
     # vote's views, read together with the size they share, need a side shade this many sigmas beyond
-    # those a side may have (see HeightEstimate._needs_other_sides).
+    # those a side may have (see HeightEstimate._needs_other_sides; sharp images with
+    # measure.vote_on_shades only: elsewhere no view reads its shades).
     height_vote_flat_shade_sigmas: float = 2.0
     # A part's height need not be one of measure.height_starts_mm: between the best height's neighbours
     # (halfway to each) the vote's sizes are interpolated at steps of this (mm), and the height where

@@ -16,8 +16,9 @@ size. The estimate has two stages.
    height; a box's two side shades, which fit some of the noise, are charged as Akaike's criterion
    charges parameters). The best height wins once it leads by ``track.height_vote_margin`` every height
    tried that does not bracket the vote's lead (see _rivals; from ``track.height_vote_min_views`` views
-   on), or after ``track.height_vote_views`` views; flat, every box whose sides its views read together
-   as a side's (not as dark as the belt nor as bright as the top: see _needs_other_sides). A winner of 0
+   on), or after ``track.height_vote_views`` views; a flat lead has to lead only the boxes whose sides
+   its views read together as a side's (not as dark as the belt nor as bright as the top: see
+   _needs_other_sides). A winner of 0
    makes the part flat: from then on it is measured as flat, exactly as a flat part always was,
    unless its sizes grow across the view as a box's silhouette does (``track.flat_check_*``, see
    _check_flat): then flat is refuted and the vote goes on without it. A
@@ -70,8 +71,10 @@ _SHAPE_DOF = 3.0
 # (a stopped belt) tells a view every few frames for as long as it stays: judging them all again would
 # cost more with every view. A part crossing the view tells far fewer (9-19 in random scenes 51, 72, 96).
 _JUDGED_VIEWS = 64
-# The parameters a box's fit has that flat's has not: its two side shades (end faces, long faces).
-_SHADES = 2
+# The parameters a box's fit has that flat's has not: its two side shades (end faces, long faces); and
+# what Akaike's criterion charges each, in units of the fit's mean square per window.
+_SHADE_PARAMETERS = 2
+_AKAIKE_PER_PARAMETER = 2.0
 # Heights closer than this (mm) are one height, apart by a rounding error only.
 _ROUNDING_MM = 1e-9
 
@@ -337,11 +340,7 @@ class HeightEstimate:
         self._another.append(np.array([t.another_shape for t in trials]))
         self._shades.append(tuple(t.shades for t in trials))
         windows = min(t.windows for t in trials)
-        # A box's fit has two parameters more than flat's (its side shades), which fit some of any view's
-        # noise: each costs it two windows' worth of its mean square, as Akaike's criterion charges (a
-        # flat part at 10 deg, its 5 mm box's sides as dark as the belt: RMS 0.034 px each, the box led
-        # its first view by 0.6 and posed it 2 mm off until the third).
-        mse = np.array([t.rms_px**2 * (1.0 + (2.0 * _SHADES / windows if t.height_mm > 0 else 0.0)) for t in trials])
+        mse = np.array([_charged_ms_px2(t, windows) for t in trials])
         # How much worse each height explains this view than its best, in windows: a view whose edges
         # no height explains (a hand over the part) counts no more than one that one height explains.
         self._excess.append(np.minimum(windows * (mse / max(float(mse.min()), 1e-12) - 1.0), windows))
@@ -374,10 +373,15 @@ class HeightEstimate:
         high = above.min() if above.size else np.inf
         apart = (heights < low) | (heights > high) | ((heights == 0) != (height_mm == 0))
         if height_mm == 0:
-            # Read only for the boxes within the margin: those beyond it are led by it anyway.
-            near = scores < scores.min() + self._cfg.height_vote_margin
-            apart &= ~np.array([h > 0 and near[k] and self._needs_other_sides(k) for k, h in enumerate(heights)])
+            apart &= ~self._other_shapes(scores)
         return scores[apart & (heights != height_mm)]
+
+    def _other_shapes(self, scores: np.ndarray) -> np.ndarray:
+        """Which heights' boxes the vote's views need sides no part has for (see _needs_other_sides), read
+        only for the boxes within track.height_vote_margin of the best score: those beyond it are led by
+        it anyway."""
+        near = scores - scores.min() < self._cfg.height_vote_margin
+        return np.array([h > 0 and bool(near[k]) and self._needs_other_sides(k) for k, h in enumerate(self.heights_mm)])
 
     def _needs_other_sides(self, k: int) -> bool:
         """Whether the vote's views of the ``k``-th height's box, read together with the size they share
@@ -393,7 +397,8 @@ class HeightEstimate:
             return False
         shades, sigma = read_together(views, self._cfg.shade_view_min_sigma)
         margin = self._cfg.height_vote_flat_shade_sigmas * sigma
-        low, high = views[-1].possible
+        # The widest the views allow (a part whose level crosses the belt's has a dark part's bounds in some).
+        low, high = min(v.possible[0] for v in views), max(v.possible[1] for v in views)
         return bool(np.any((shades + margin < low) | (shades - margin >= high)))
 
     def _scores(self) -> np.ndarray:
@@ -439,8 +444,8 @@ class HeightEstimate:
             return 0.0, self._sizes_weighed()[2][k]
         lo = 0.5 * (heights[max(k - 1, 0)] + heights[k])
         hi = 0.5 * (heights[min(k + 1, len(heights) - 1)] + heights[k])
-        # The height tried itself among them, whatever the step, and no step a rounding error from it (7.5
-        # + 25 x 0.1 is 9.999999999999991: where the scores tie, the first would lead, not 10).
+        # The height tried itself among them, whatever the step, and no step a rounding error from it
+        # (np.arange(7.5, 15, 0.1)[25] is 9.999999999999991: where the scores tie, the first would lead).
         steps = np.arange(lo, hi, self._cfg.height_vote_resolution_mm)
         apart = np.abs(steps - heights[k]) > _ROUNDING_MM
         at = np.union1d(steps[apart], [heights[k], hi])
@@ -629,6 +634,15 @@ def height_information(info: np.ndarray) -> float:
     """What a view's information on (length, width, height) tells of the height alone, its size
     marginalised out (a Schur complement; 1/mm^2, 0 or less: nothing)."""
     return float(marginalised(info, np.zeros(3), [2], [0, 1])[0][0, 0])
+
+
+def _charged_ms_px2(trial: HeightTrial, windows: int) -> float:
+    """A trial's mean square (px^2) as the vote compares it: a box's fit has parameters flat's has not (its
+    side shades), which fit some of any view's noise, and each is charged as Akaike's criterion charges
+    one (a flat part at 10 deg, its 5 mm box's sides as dark as the belt: RMS 0.034 px each; uncharged,
+    the box led its first view by 0.6 and posed the part 2 mm off until the next vote)."""
+    extra = _SHADE_PARAMETERS if trial.height_mm > 0 else 0
+    return trial.rms_px**2 * (1.0 + _AKAIKE_PER_PARAMETER * extra / windows)
 
 
 def _rect_at(trials: tuple[HeightTrial, ...], height_mm: float) -> Rect | None:

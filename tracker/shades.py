@@ -28,9 +28,10 @@ import numpy as np
 from tracker.boxfit import ShadePrior, ViewShades, marginalised
 from tracker.config import TrackConfig
 
-# The information (1/mm^2, 1/shade^2) read_together adds to every parameter: nothing a view tells, but a
-# combination no view tells gets a variance of 1e9 rather than none.
-_UNTOLD = 1e-9
+# The least information (a fraction of the most, per unit of a combination of parameters) read_together
+# takes a combination to have: one no view tells (a view's sliver tells its shade and the size beside
+# it only as one sum) gets a vast variance rather than the pseudo-inverse's small one, or a negative one.
+_UNTOLD = 1e-12
 
 
 @dataclass(frozen=True)
@@ -150,14 +151,15 @@ def _told(view: ViewShades, cfg: TrackConfig) -> tuple[np.ndarray, np.ndarray]:
 
 def read_together(views: list[ViewShades], min_sigma: float) -> tuple[np.ndarray, np.ndarray]:
     """The side shades ``views`` of one box tell together, with the size they share: each end face's,
-    then each long face's (as FaceShades orders them, the first view's facing first), and their 1 sigma
-    (inf: no view shows that face). Every shade a view shows counts, told or not (a sliver's reading as
-    dark as the belt, or as bright as the top, is what this is for), each view no surer of a shade alone
-    (its size unknown) than ``min_sigma``, as a track learns them."""
+    then each long face's (as FaceShades orders them, the face the first view that says which it saw
+    first), and their 1 sigma (inf: no view shows that face). Every shade a view shows counts, told or
+    not (a sliver's reading as dark as the belt, or as bright as the top, is what this is for), each
+    view no surer of a shade alone (its size unknown) than ``min_sigma``. A view whose information is
+    not finite tells nothing."""
     info, vec = np.zeros((6, 6)), np.zeros(6)
     reference = next((view.facing_deg for view in views if view.facing_deg is not None), None)
     for view in views:
-        if view.info is None:
+        if view.info is None or view.vec is None or not (np.isfinite(view.info).all() and np.isfinite(view.vec).all()):
             continue
         shown = np.diag(view.info)[2:] > 0
         if not shown.any():
@@ -176,12 +178,13 @@ def read_together(views: list[ViewShades], min_sigma: float) -> tuple[np.ndarray
         use = [0, 1, *(2 + np.nonzero(shown)[0])]
         cov = _inverse(info[np.ix_(use, use)])
         shades[shown] = (cov @ vec[use])[2:]
-        sigma[shown] = np.sqrt(np.maximum(np.diag(cov)[2:], 0.0))
+        sigma[shown] = np.sqrt(np.diag(cov)[2:])
     return shades, sigma
 
 
 def _inverse(info: np.ndarray) -> np.ndarray:
-    """The covariance of an information matrix that may leave some combination untold (one view's sliver:
-    its shade and the size beside it only as one sum): that combination's variance vast, not the
-    pseudo-inverse's small one."""
-    return np.linalg.inv(info + _UNTOLD * np.eye(len(info)))
+    """The covariance of an information matrix (symmetric, positive semi-definite up to rounding), each
+    combination of parameters taken to hold at least _UNTOLD of the most any does: positive definite."""
+    values, vectors = np.linalg.eigh(0.5 * (info + info.T))
+    least = max(float(np.abs(values).max(initial=0.0)), 1.0) * _UNTOLD
+    return (vectors / np.maximum(values, least)) @ vectors.T
