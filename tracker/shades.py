@@ -83,8 +83,7 @@ class ShadeEstimate:
         info, vec = _told(view, self._cfg)
         if self._reference_deg is None:
             self._reference_deg = view.facing_deg
-        end, long = _slots(view.facing_deg, self._reference_deg)
-        at = [0, 1, 2 + end, 4 + long]
+        at = _placed(view.facing_deg, self._reference_deg)
         # Newer views weigh more: the information kept fades over shade_memory_views views.
         keep = 1.0 - 1.0 / self._cfg.shade_memory_views
         self._info *= keep
@@ -123,6 +122,13 @@ def _slots(facing_deg: tuple[float, float] | None, reference_deg: tuple[float, f
     return end, long
 
 
+def _placed(facing_deg: tuple[float, float] | None, reference_deg: tuple[float, float] | None) -> list[int]:
+    """Where a view's (length, width, end shade, long shade) go among (length, width, end shades a and b,
+    long shades a and b): its faces by which way they face (see _slots)."""
+    end, long = _slots(facing_deg, reference_deg)
+    return [0, 1, 2 + end, 4 + long]
+
+
 def _told(view: ViewShades, cfg: TrackConfig) -> tuple[np.ndarray, np.ndarray]:
     """What ``view`` adds (information 4x4 and vector over length, width and the two shades): only the
     shades it tells to track.shade_view_max_sigma, no surer than track.shade_view_min_sigma (nor than
@@ -139,11 +145,23 @@ def _told(view: ViewShades, cfg: TrackConfig) -> tuple[np.ndarray, np.ndarray]:
         return info, info @ at
     # A shade it does not tell is marginalised out (not held where the fit had it: what the view tells
     # of the size next to that face would lean towards it).
-    sub = [0, 1, *use]
-    info, vec = marginalised(view.info, view.vec, sub, [i for i in range(4) if i not in sub])
+    sub, info, vec = _kept(view, told)
     # No surer than the least variance of each shade it tells: its information scaled down to that.
     alone = np.diag(np.linalg.pinv(info))[2:]
-    scale = min(1.0, float(np.min(alone / least[told])))
+    return _embedded(sub, info, vec, min(1.0, float(np.min(alone / least[told]))))
+
+
+def _kept(view: ViewShades, shades: np.ndarray) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """``view``'s information and vector on the size and the ``shades`` (which of end, long) alone, the
+    rest marginalised out, and which of (length, width, end shade, long shade) they are."""
+    sub = [0, 1, *(2 + np.nonzero(shades)[0])]
+    info, vec = marginalised(view.info, view.vec, sub, [i for i in range(4) if i not in sub])
+    return sub, info, vec
+
+
+def _embedded(sub: list[int], info: np.ndarray, vec: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """Information and vector on ``sub`` of (length, width, end shade, long shade), scaled by ``scale``,
+    as the 4x4 and 4 a view adds (zero elsewhere)."""
     full, full_vec = np.zeros((4, 4)), np.zeros(4)
     full[np.ix_(sub, sub)], full_vec[sub] = info * scale, vec * scale
     return full, full_vec
@@ -164,14 +182,12 @@ def read_together(views: list[ViewShades], min_sigma: float) -> tuple[np.ndarray
         shown = np.diag(view.info)[2:] > 0
         if not shown.any():
             continue
-        sub = [0, 1, *(2 + np.nonzero(shown)[0])]
-        told, told_vec = marginalised(view.info, view.vec, sub, [i for i in range(4) if i not in sub])
-        alone = np.diag(_inverse(told))[2:]
-        scale = min(1.0, float(np.min(alone / min_sigma**2)))
-        end, long = _slots(view.facing_deg, reference)
-        at = np.array([0, 1, 2 + end, 4 + long])[sub]
-        info[np.ix_(at, at)] += told * scale
-        vec[at] += told_vec * scale
+        sub, kept, kept_vec = _kept(view, shown)
+        alone = np.diag(_inverse(kept))[2:]
+        at = _placed(view.facing_deg, reference)
+        full, full_vec = _embedded(sub, kept, kept_vec, min(1.0, float(np.min(alone / min_sigma**2))))
+        info[np.ix_(at, at)] += full
+        vec[at] += full_vec
     shades, sigma = np.full(4, math.nan), np.full(4, math.inf)
     shown = np.diag(info)[2:] > 0
     if shown.any():
