@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     if args.record:
         if os.path.exists(args.record) and not args.force:
             raise BadInput(f"--record {args.record}: the file exists (give --force to replace it)")
-        from tracker.recording.demo import record_scene  # noqa: PLC0415 - optional edge
+        from tracker.demo_recording import record_scene  # noqa: PLC0415 - optional edge
         from tracker.recording.writer import RecorderConfig  # noqa: PLC0415
 
         if args.zstd_level is not None and not -7 <= args.zstd_level <= 22:
