@@ -21,7 +21,7 @@ from tracker.cli import main
 from tracker.config import MeasureConfig, TrackerConfig
 from tracker.evaluate import evaluate, own_height_readings
 from tracker.geometry import Rect, rectangle_corners
-from tracker.measure import KnownPart
+from tracker.measure import HALF_WINDOW_PX, KnownPart, _Crossings, _Edges, _uneven_faces
 from tracker.pipeline import Pipeline
 from tracker.shadebounds import BRIGHT, ShadeBounds, shade_bounds
 from tracker.synthetic import CameraSpec, PartSpec, Renderer, SceneSpec
@@ -380,6 +380,44 @@ def test_a_vote_view_tells_its_own_shape_from_the_height_leading_or_the_best_fit
         assert abs(height - 20.0) < min(3.0 * sigma_mm[2], 1.5), (i, height, sigma_mm)
         assert abs(length - 80.0) < 0.5 and abs(width - 50.0) < 0.5, (i, length, width)
         pipeline.process(i, image, scene.t_ns(i))
+
+
+def _outline_edges(right: tuple[float, float, float]) -> tuple[_Edges, np.ndarray, Rect]:
+    """A flat outline 40 x 20 px (1 mm per px) of a part 195 grey levels on a belt of 50, its edge windows
+    across each side: along rows its left and right sides, along columns its top and bottom, each
+    window's boundary pixel half covered (122) and the part inside it. Its right side's windows read
+    ``right`` (grey levels) at their boundary pixel, face pixel and the next one in."""
+    k, top, belt = HALF_WINDOW_PX, 195.0, 50.0
+
+    def crossings(n: int, far: tuple[float, float, float] | None) -> _Crossings:
+        image = np.full((2 * n, 2 * k), belt)
+        image[:n, k:] = top  # near side (rising): the part from the boundary pixel on
+        image[n:, : k - 1] = top  # far side (falling): the part up to the boundary pixel
+        image[:n, k] = image[n:, k - 1] = 0.5 * (top + belt)
+        if far is not None:
+            image[n:, [k - 1, k - 2, k - 3]] = far
+        rising = np.arange(2 * n) < n
+        return _Crossings(np.arange(2 * n) % n, np.zeros(2 * n, dtype=int), rising, image, np.full_like(image, belt))
+
+    rows, cols = crossings(20, right), crossings(40, None)
+    ys, xs = np.arange(20) - 9.5, np.arange(40) - 19.5
+    points = np.concatenate([np.column_stack([np.full(20, -20.0), ys]), np.column_stack([np.full(20, 20.0), ys]),
+                             np.column_stack([xs, np.full(40, -10.0)]), np.column_stack([xs, np.full(40, 10.0)])])
+    edges = _Edges(points, rows, cols, (0, 0), (np.full(40, top), np.full(80, top)), BRIGHT, 0.0)
+    return edges, points, Rect(0.0, 0.0, 0.0, 40.0, 20.0)
+
+
+@pytest.mark.parametrize("right,uneven", [((122.0, 195.0, 195.0), False), ((52.0, 150.0, 195.0), False),
+                                          ((110.0, 140.0, 195.0), True), ((90.0, 120.0, 120.0), True)])
+def test_a_side_reads_a_face_unlike_the_others_only_where_its_face_is_unlike_them(right, uneven):
+    """A flat outline's sides read as one face unless one side's face differs (measure._uneven_faces). A
+    blob whose boundary pixel lies past the edge along one side (the textured belt model's outline,
+    drawn from working pixels, along some sides: its boundary pixel the belt, 52 on a belt of 50) has
+    its face pixel blended with the belt (150 against the top's 195) and the top next to it: that side
+    reads the top, as a flat part's does. A box's side face, a sliver beside a partly covered boundary
+    pixel (140) or two pixels wide (120), reads unlike the top."""
+    edges, points, rect = _outline_edges(right)
+    assert _uneven_faces(edges, points, rect) == uneven
 
 
 @pytest.mark.parametrize("height_mm,vote_on_shades", [(0.0, True), (20.0, True), (20.0, False)])

@@ -61,6 +61,9 @@ _ALIKE_MS = 0.1
 # each side over at least this many windows, is a box's (see _uneven_faces).
 _UNEVEN_RATIO = 0.8
 _UNEVEN_MIN_WINDOWS = 5
+# A window's boundary pixel that differs from the belt by less than this fraction of the pixel next to
+# its face does lies past the part's edge (see _Crossings.inner_contrast).
+_PAST_EDGE = 0.25
 # A coarse belt reference's plane correction drops belt pixels this many robust sigmas off (_plane_corrected).
 _PLANE_TRIM_SIGMAS = 3.0
 # ... and is left out where it would move the level by more than this fraction of the part's contrast.
@@ -682,12 +685,12 @@ def told_alike(best: BoxFit, other: BoxFit) -> tuple[np.ndarray, np.ndarray]:
 
 def _uneven_faces(edges: _Edges, points_mm: np.ndarray, rect: Rect) -> bool:
     """Whether the sides of a blob's flat outline ``rect`` read faces unlike each other: the face next to
-    its edges (see _Crossings.face_levels) differs from the belt under it by less than
+    its edges (see _Crossings.inner_contrast) differs from the belt under it by less than
     _UNEVEN_RATIO of the most along one side than along another (each side's median), as where a
     box's side face makes one side of its silhouette. A flat part's top is one face. ``points_mm``:
     the edge points (``edges.points_px``) on the belt."""
     k = HALF_WINDOW_PX
-    contrast = np.abs(np.concatenate([edges.rows.face_contrast(k), edges.cols.face_contrast(k)]))
+    contrast = np.concatenate([edges.rows.inner_contrast(k), edges.cols.inner_contrast(k)])
     corners = rectangle_corners(rect.x_mm, rect.y_mm, rect.angle_deg, rect.length_mm, rect.width_mm)
     # Each point's distance to each side's line (the sides' lines: corner i to i+1).
     a, b = corners, np.roll(corners, -1, axis=0)
@@ -770,17 +773,27 @@ class _Crossings:
         belt + c * part); along a row the covered fractions add up to where the edge crosses it."""
         return ((self.image - self.belt) / (np.reshape(level, (-1, 1)) - self.belt)).sum(axis=1)
 
-    def face_contrast(self, half_window: int) -> np.ndarray:
-        """Each window's face next to the edge (see face_levels) less the belt under that pixel."""
-        return self.face_levels(half_window) - self._at_face(self.belt, half_window)
+    def inner_contrast(self, half_window: int) -> np.ndarray:
+        """Each window's face's contrast with the belt (absolute): at its face pixel, or where the window's
+        boundary pixel reads less than _PAST_EDGE of the next pixel in, at that one. Such a boundary
+        pixel lies past the edge, and the face pixel is a blend with the belt: the textured belt model's
+        outline, drawn from working pixels two or three wide, reaches so along some sides
+        (bench/heights_random.py --textured scene 0, a flat part: along one side its face pixels read
+        102-113 grey levels off the belt against 143-147 along the others, which took it for a box's
+        side face, and a 5 mm box led its vote for 8 frames, 1.2 mm off). A thin side face's sliver
+        is read where it is: its edge's pixel is partly covered."""
+        contrast = np.abs(self.image - self.belt)
+        boundary, face, next_in = (self._at_face(contrast, half_window, d) for d in (-1, 0, 1))
+        return np.where(boundary < _PAST_EDGE * next_in, next_in, face)
 
     def face_levels(self, half_window: int) -> np.ndarray:
         """Each window's face next to the edge: the first pixel wholly inside, one past the boundary pixel."""
         return self._at_face(self.image, half_window)
 
-    def _at_face(self, values: np.ndarray, half_window: int) -> np.ndarray:
-        """Of ``values`` (N, 2k), each window's at its face pixel (see face_levels)."""
-        return np.where(self.rising, values[:, half_window + 1], values[:, half_window - 2])
+    def _at_face(self, values: np.ndarray, half_window: int, further_in: int = 0) -> np.ndarray:
+        """Of ``values`` (N, 2k), each window's at its face pixel (see face_levels), or ``further_in``
+        pixels further into the part."""
+        return np.where(self.rising, values[:, half_window + 1 + further_in], values[:, half_window - 2 - further_in])
 
     def ends_px(self) -> tuple[np.ndarray, np.ndarray]:
         """Each window's inner end (Nx2: col, row, pixel coordinates of this orientation) and its
