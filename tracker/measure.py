@@ -61,8 +61,8 @@ _ALIKE_MS = 0.1
 # each side over at least this many windows, is a box's (see _uneven_faces).
 _UNEVEN_RATIO = 0.8
 _UNEVEN_MIN_WINDOWS = 5
-# A window's boundary pixel that differs from the belt by less than this fraction of the pixel next to
-# its face does lies past the part's edge (see _Crossings.inner_contrast).
+# A window's boundary pixel whose contrast with the belt is less than this fraction of the contrast of
+# the pixel beyond its face pixel lies past the part's edge (see _Crossings.inner_contrast).
 _PAST_EDGE = 0.25
 # A coarse belt reference's plane correction drops belt pixels this many robust sigmas off (_plane_corrected).
 _PLANE_TRIM_SIGMAS = 3.0
@@ -792,7 +792,7 @@ class _Crossings:
 
     def _at_face(self, values: np.ndarray, half_window: int, further_in: int = 0) -> np.ndarray:
         """Of ``values`` (N, 2k), each window's at its face pixel (see face_levels), or ``further_in``
-        pixels further into the part."""
+        pixels further into the part (-1: its boundary pixel)."""
         return np.where(self.rising, values[:, half_window + 1 + further_in], values[:, half_window - 2 - further_in])
 
     def ends_px(self) -> tuple[np.ndarray, np.ndarray]:
