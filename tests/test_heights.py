@@ -382,24 +382,28 @@ def test_a_vote_view_tells_its_own_shape_from_the_height_leading_or_the_best_fit
         pipeline.process(i, image, scene.t_ns(i))
 
 
-def _outline_edges(right: tuple[float, float, float]) -> tuple[_Edges, np.ndarray, Rect]:
+def _outline_edges(side: str, face: tuple[float, float, float]) -> tuple[_Edges, np.ndarray, Rect]:
     """A flat outline 40 x 20 px (1 mm per px) of a part 195 grey levels on a belt of 50, its edge windows
     across each side: along rows its left and right sides, along columns its top and bottom, each
-    window's boundary pixel half covered (122) and the part inside it. Its right side's windows read
-    ``right`` (grey levels) at their boundary pixel, face pixel and the next one in."""
+    window's boundary pixel half covered (122) and the part inside it. The windows of its ``side``
+    ("left": rising along rows, or "right": falling) read ``face`` (grey levels) at their boundary
+    pixel, face pixel and the one beyond."""
     k, top, belt = HALF_WINDOW_PX, 195.0, 50.0
 
-    def crossings(n: int, far: tuple[float, float, float] | None) -> _Crossings:
+    def crossings(n: int, near: tuple | None = None, far: tuple | None = None) -> _Crossings:
         image = np.full((2 * n, 2 * k), belt)
         image[:n, k:] = top  # near side (rising): the part from the boundary pixel on
         image[n:, : k - 1] = top  # far side (falling): the part up to the boundary pixel
         image[:n, k] = image[n:, k - 1] = 0.5 * (top + belt)
+        if near is not None:
+            image[:n, [k, k + 1, k + 2]] = near
         if far is not None:
             image[n:, [k - 1, k - 2, k - 3]] = far
         rising = np.arange(2 * n) < n
         return _Crossings(np.arange(2 * n) % n, np.zeros(2 * n, dtype=int), rising, image, np.full_like(image, belt))
 
-    rows, cols = crossings(20, right), crossings(40, None)
+    rows = crossings(20, near=face) if side == "left" else crossings(20, far=face)
+    cols = crossings(40)
     ys, xs = np.arange(20) - 9.5, np.arange(40) - 19.5
     points = np.concatenate([np.column_stack([np.full(20, -20.0), ys]), np.column_stack([np.full(20, 20.0), ys]),
                              np.column_stack([xs, np.full(40, -10.0)]), np.column_stack([xs, np.full(40, 10.0)])])
@@ -407,17 +411,24 @@ def _outline_edges(right: tuple[float, float, float]) -> tuple[_Edges, np.ndarra
     return edges, points, Rect(0.0, 0.0, 0.0, 40.0, 20.0)
 
 
-@pytest.mark.parametrize("right,uneven", [((122.0, 195.0, 195.0), False), ((52.0, 150.0, 195.0), False),
-                                          ((110.0, 140.0, 195.0), True), ((90.0, 120.0, 120.0), True)])
-def test_a_side_reads_a_face_unlike_the_others_only_where_its_face_is_unlike_them(right, uneven):
-    """A flat outline's sides read as one face unless one side's face differs (measure._uneven_faces). A
-    blob whose boundary pixel lies past the edge along one side (the textured belt model's outline,
-    drawn from working pixels, along some sides: its boundary pixel the belt, 52 on a belt of 50) has
-    its face pixel blended with the belt (150 against the top's 195) and the top next to it: that side
-    reads the top, as a flat part's does. A box's side face, a sliver beside a partly covered boundary
-    pixel (140) or two pixels wide (120), reads unlike the top."""
-    edges, points, rect = _outline_edges(right)
-    assert _uneven_faces(edges, points, rect) == uneven
+@pytest.mark.parametrize("side", ["left", "right"])
+@pytest.mark.parametrize("face,coarse,uneven", [
+    ((122.0, 195.0, 195.0), True, False),  # the top, as along the other sides
+    ((52.0, 150.0, 195.0), True, False),  # a coarse outline a pixel past the edge: the top beyond
+    ((52.0, 150.0, 195.0), False, True),  # traced at full resolution: a sliver's faint edge pixel
+    ((110.0, 140.0, 195.0), True, True),  # a sliver beside a partly covered boundary pixel
+    ((90.0, 120.0, 120.0), True, True),  # a side face two pixels wide
+])
+def test_a_side_reads_a_face_unlike_the_others_only_where_its_face_is_unlike_them(side, face, coarse, uneven):
+    """A flat outline's sides read as one face unless one side's face differs (measure._uneven_faces). An
+    outline drawn from working pixels (the textured belt model's) reaches a pixel past the edge along
+    some sides: its boundary pixel the belt (52 on a belt of 50), its face pixel a blend with the belt
+    (150 against the top's 195), the top beyond; that side reads the top, as a flat part's does. Traced
+    at full resolution, an outline stops at the edge's pixel, and the same pixels are a thin side face's
+    sliver beside a faint edge pixel: uneven. A sliver beside a partly covered boundary pixel (140) or a
+    side face two pixels wide (120) reads unlike the top either way."""
+    edges, points, rect = _outline_edges(side, face)
+    assert _uneven_faces(edges, points, rect, coarse_outline=coarse) == uneven
 
 
 @pytest.mark.parametrize("height_mm,vote_on_shades", [(0.0, True), (20.0, True), (20.0, False)])

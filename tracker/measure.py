@@ -61,8 +61,9 @@ _ALIKE_MS = 0.1
 # each side over at least this many windows, is a box's (see _uneven_faces).
 _UNEVEN_RATIO = 0.8
 _UNEVEN_MIN_WINDOWS = 5
-# A window's boundary pixel whose contrast with the belt is less than this fraction of the contrast of
-# the pixel beyond its face pixel lies past the part's edge (see _Crossings.inner_contrast).
+# Where an outline is drawn from working pixels, a window's boundary pixel whose contrast with the belt is
+# less than this fraction of the contrast of the pixel beyond its face pixel lies past the part's edge
+# (see _Crossings.inner_contrast).
 _PAST_EDGE = 0.25
 # A coarse belt reference's plane correction drops belt pixels this many robust sigmas off (_plane_corrected).
 _PLANE_TRIM_SIGMAS = 3.0
@@ -135,7 +136,8 @@ class Measurer:
         """``smoothing_px``: the belt model's smoothing (a Gaussian's sigma, px; 0: none), through which the
         edges of parts whose contrast the belt's texture disturbs are read (measure.smooth_texture_ratio).
         ``coarse_reference``: the belt reference is coarse and still learning (the textured model's, at low
-        resolution), so near a part it is corrected by a plane fitted to the belt pixels around it."""
+        resolution), so near a part it is corrected by a plane fitted to the belt pixels around it; and
+        the blob's outline is drawn from the model's working pixels (see _Crossings.inner_contrast)."""
         self.mapper = mapper
         self.config = config
         self._smoothing_px = smoothing_px
@@ -279,7 +281,7 @@ class Measurer:
                 # A box: its side faces are part of the silhouette; fit the box to its edges instead.
                 box, trials = self._fit_box(points_norm, self._windows(edges), rect, known)
                 if trials and flat_rect is not None and edges.blur_px == 0 and cfg.vote_on_shades:
-                    uneven = _uneven_faces(edges, points_mm, flat_rect)
+                    uneven = _uneven_faces(edges, points_mm, flat_rect, self._coarse_reference)
                     trials = tuple(replace(t, faces_uneven=uneven) if t.height_mm == 0 else t for t in trials)
                 if box is not None:
                     rect = box.rect
@@ -683,14 +685,15 @@ def told_alike(best: BoxFit, other: BoxFit) -> tuple[np.ndarray, np.ndarray]:
     return widened(best.shape_info, best.shape_vec, np.outer(apart, apart) / 4.0)
 
 
-def _uneven_faces(edges: _Edges, points_mm: np.ndarray, rect: Rect) -> bool:
+def _uneven_faces(edges: _Edges, points_mm: np.ndarray, rect: Rect, coarse_outline: bool = False) -> bool:
     """Whether the sides of a blob's flat outline ``rect`` read faces unlike each other: the face next to
-    its edges (see _Crossings.inner_contrast) differs from the belt under it by less than
-    _UNEVEN_RATIO of the most along one side than along another (each side's median), as where a
-    box's side face makes one side of its silhouette. A flat part's top is one face. ``points_mm``:
-    the edge points (``edges.points_px``) on the belt."""
+    its edges (see _Crossings.inner_contrast, ``coarse_outline`` as there) differs from the belt under it
+    by less than _UNEVEN_RATIO of the most along one side than along another (each side's median), as
+    where a box's side face makes one side of its silhouette. A flat part's top is one face.
+    ``points_mm``: the edge points (``edges.points_px``) on the belt."""
     k = HALF_WINDOW_PX
-    contrast = np.concatenate([edges.rows.inner_contrast(k), edges.cols.inner_contrast(k)])
+    contrast = np.concatenate([edges.rows.inner_contrast(k, coarse_outline),
+                               edges.cols.inner_contrast(k, coarse_outline)])
     corners = rectangle_corners(rect.x_mm, rect.y_mm, rect.angle_deg, rect.length_mm, rect.width_mm)
     # Each point's distance to each side's line (the sides' lines: corner i to i+1).
     a, b = corners, np.roll(corners, -1, axis=0)
@@ -773,18 +776,23 @@ class _Crossings:
         belt + c * part); along a row the covered fractions add up to where the edge crosses it."""
         return ((self.image - self.belt) / (np.reshape(level, (-1, 1)) - self.belt)).sum(axis=1)
 
-    def inner_contrast(self, half_window: int) -> np.ndarray:
-        """Each window's face's contrast with the belt (absolute): at its face pixel, or where the window's
-        boundary pixel reads less than _PAST_EDGE of the next pixel in, at that one. Such a boundary
-        pixel lies past the edge, and the face pixel is a blend with the belt: the textured belt model's
-        outline, drawn from working pixels two or three wide, reaches so along some sides
-        (bench/heights_random.py --textured scene 0, a flat part: along one side its face pixels read
-        102-113 grey levels off the belt against 143-147 along the others, which took it for a box's
-        side face, and a 5 mm box led its vote for 8 frames, 1.2 mm off). A thin side face's sliver
-        is read where it is: its edge's pixel is partly covered."""
+    def inner_contrast(self, half_window: int, coarse_outline: bool) -> np.ndarray:
+        """Each window's face's contrast with the belt (absolute), at its face pixel; with a
+        ``coarse_outline`` (drawn from working pixels two or three wide, as the textured belt model's
+        is), where the window's boundary pixel's contrast is less than _PAST_EDGE of the pixel beyond
+        its face pixel, at that pixel. Such an outline reaches a pixel past the edge along some sides,
+        and there the face pixel is a blend with the belt (bench/heights_random.py --textured scene 0,
+        a flat part: along one side its face pixels read 102-113 grey levels off the belt against
+        143-147 along the others, which took it for a box's side face, and a 5 mm box led its vote
+        for 8 frames, 1.2 mm off). An outline traced at full resolution stops at the edge's pixel: a
+        faint boundary pixel there is the edge of a side face's sliver, read where it is. (The pixel
+        beyond the face pixel is the window's innermost at half_window = 3.)"""
         contrast = np.abs(self.image - self.belt)
-        boundary, face, next_in = (self._at_face(contrast, half_window, d) for d in (-1, 0, 1))
-        return np.where(boundary < _PAST_EDGE * next_in, next_in, face)
+        face = self._at_face(contrast, half_window)
+        if not coarse_outline:
+            return face
+        boundary, beyond = (self._at_face(contrast, half_window, d) for d in (-1, 1))
+        return np.where(boundary < _PAST_EDGE * beyond, beyond, face)
 
     def face_levels(self, half_window: int) -> np.ndarray:
         """Each window's face next to the edge: the first pixel wholly inside, one past the boundary pixel."""
