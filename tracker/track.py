@@ -82,16 +82,33 @@ class Track:
                 worst = d
         return worst
 
-    def piece_aside(self, m: Measurement, cfg: TrackConfig) -> bool:
-        """Whether ``m``, a piece cut from a blob, lies farther from the part's predicted centre than a size
-        jump (``size_jump_mm``, or ``size_jump_sigmas`` times the scatter of its blobs about its
-        predictions): a piece of the part beside it (its blob cut where it was whole), fitted at the size it
-        was lent, not the part. Its own size need not say so: a side the cut left open is held by the lent
-        size alone (random scene 37 under a lamp: noise on a faint face cut the blob in three, and the
-        largest piece, at the part's size 11 mm aside, threw its velocity 570 mm/s off). A young track's
-        predictions scatter (two parts entering the view touching: 5-15 mm) and allow as much."""
+    def aside(self, m: Measurement, cfg: TrackConfig) -> float:
+        """How much larger (> 0) or smaller (< 0) than the part a blob lying aside from its predicted centre
+        is (0: not aside, or of its size): farther than a size jump (``size_jump_mm``, or ``size_jump_sigmas``
+        times the scatter of its blobs about its predictions), and either a piece cut from a blob or a
+        whole blob of another size by more than ``size_jump_mm`` on a side (and ``size_jump_sigmas`` times
+        the scatter of its sizes: the CCTV footage's boxes, 4.4 mm a pixel, scatter by about 3 mm). Such
+        a blob is not the part:
+
+        - a piece of the part beside it (its blob cut where it was whole), fitted at the size it was lent.
+          Its own size need not say so: a side the cut left open is held by the lent size alone (random
+          scene 37 under a lamp: noise on a faint face cut the blob in three, and the largest piece, at
+          the part's size 11 mm aside, threw its velocity 570 mm/s off);
+        - the part with something beside it that the size check lets pass, as within its fraction of the
+          part's size (random scene 42 under a lamp: a 60 mm box's dim long face, partly segmented, made
+          blobs 5.6 and 4.0 mm larger and 10 mm aside; taken, their scatter let blobs 7 mm larger in).
+
+        A young track's predictions scatter (two parts entering the view touching: 5-15 mm) and allow as
+        much. A part pushed aside (a hand, a guide rail) keeps its size, and is followed."""
         allowed_mm = max(cfg.size_jump_mm, cfg.size_jump_sigmas * math.sqrt(self.position_var_mm2))
-        return m.piece and math.dist(self.position, (m.rect.x_mm, m.rect.y_mm)) > allowed_mm
+        if math.dist(self.position, (m.rect.x_mm, m.rect.y_mm)) <= allowed_mm:
+            return 0.0
+        if m.piece:
+            return -cfg.size_jump_mm
+        residuals = self._size_residuals(m)
+        worst = float(residuals[np.argmax(np.abs(residuals))])
+        scatter_mm = cfg.size_jump_sigmas * math.sqrt(self.size_var_mm2)
+        return worst if abs(worst) > max(cfg.size_jump_mm, scatter_mm) else 0.0
 
     def _size_residuals(self, m: Measurement) -> np.ndarray:
         """Blob minus part, shorter sides first (mm). A piece cut from a blob may be a piece of the part,
@@ -398,8 +415,8 @@ class Tracker:
         hidden (an arm, a bracket; smaller) or another part has joined it (larger: then it is not pickable).
         A size kept for max_coast_s is the part's own after all (its first blobs were wrong)."""
         cfg = self.config
-        # A piece aside is as a part partly hidden: smaller than the part.
-        jump = track.size_jump(m, cfg) or (-cfg.size_jump_mm if track.piece_aside(m, cfg) else 0.0)
+        # A blob aside is as a part partly hidden (a piece: smaller) or joined by another (larger).
+        jump = track.size_jump(m, cfg) or track.aside(m, cfg)
         if not jump:
             track.odd_size_since_ns = None
             return m
