@@ -73,12 +73,15 @@ class Track:
             self.t_ns = t_ns
             self._normalise()
 
-    def size_jump(self, m: Measurement, cfg: TrackConfig) -> float:
-        """How much larger (> 0) or smaller (< 0) the blob is than the part, beyond the tolerance; else 0."""
+    def size_jump(self, m: Measurement, cfg: TrackConfig, fraction: float | None = None) -> float:
+        """How much larger (> 0) or smaller (< 0) the blob is than the part, beyond the tolerance (the
+        larger of ``size_jump_mm``, ``fraction`` of the side, by default ``size_jump_fraction``, and
+        ``size_jump_sigmas`` times its sizes' scatter); else 0."""
+        fraction = cfg.size_jump_fraction if fraction is None else fraction
         scatter_mm = cfg.size_jump_sigmas * math.sqrt(self.size_var_mm2)
         worst = 0.0
         for d, p in zip(self._size_residuals(m), sorted(self.kf.x[[LENGTH, WIDTH], 0]), strict=True):
-            if abs(d) > max(cfg.size_jump_mm, cfg.size_jump_fraction * p, scatter_mm) and abs(d) > abs(worst):
+            if abs(d) > max(cfg.size_jump_mm, fraction * p, scatter_mm) and abs(d) > abs(worst):
                 worst = d
         return worst
 
@@ -103,12 +106,7 @@ class Track:
         allowed_mm = max(cfg.size_jump_mm, cfg.size_jump_sigmas * math.sqrt(self.position_var_mm2))
         if math.dist(self.position, (m.rect.x_mm, m.rect.y_mm)) <= allowed_mm:
             return 0.0
-        if m.piece:
-            return -cfg.size_jump_mm
-        residuals = self._size_residuals(m)
-        worst = float(residuals[np.argmax(np.abs(residuals))])
-        scatter_mm = cfg.size_jump_sigmas * math.sqrt(self.size_var_mm2)
-        return worst if abs(worst) > max(cfg.size_jump_mm, scatter_mm) else 0.0
+        return -cfg.size_jump_mm if m.piece else float(self.size_jump(m, cfg, fraction=0.0))
 
     def _size_residuals(self, m: Measurement) -> np.ndarray:
         """Blob minus part, shorter sides first (mm). A piece cut from a blob may be a piece of the part,
