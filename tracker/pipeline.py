@@ -106,7 +106,7 @@ class Pipeline:
         t1 = clock()
         undistort_before = self.mapper.spent_ns
         measurements = self.measurer(frame, self.segmenter.reference, guarded.mask, self._known(t_ns),
-                                     self.segmenter.shadows)
+                                     self.segmenter.shadows, self.segmenter.unsure)
         if guarded.at_edge:
             # A blob reaching the edge of the region of interest may go on outside it: clipped.
             measurements = [dataclasses.replace(m, clipped=True) if m.bbox_px in guarded.at_edge else m

@@ -62,6 +62,13 @@ class Segmenter:
         # None once none is left).
         self._suspect: np.ndarray | None = None
 
+    @property
+    def unsure(self) -> np.ndarray | None:
+        """Where the reference is not yet the belt's own (uint8 mask, > 0 there; None: nowhere): the first
+        frame's pixels unlike the belt's level (a part in view at the start), which stand in for the belt
+        until they show it (see _start_up)."""
+        return self._suspect
+
     def __call__(self, frame: np.ndarray) -> np.ndarray:
         cfg = self.config
         if self.reference is None:

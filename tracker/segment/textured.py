@@ -93,6 +93,9 @@ class TexturedSegmenter:
         # The light parts' shadows in the last frame (255 in them; None: none), seen at full resolution:
         # the edges beside them are read against the belt as dark as it is there.
         self.shadows: UpsampledView | None = None
+        # Where its reference is not yet the belt's own: nowhere it knows of (a coarse model learnt from
+        # the start; measure.py reads its belt through a fitted plane instead).
+        self.unsure: np.ndarray | None = None
 
     @property
     def reference(self) -> UpsampledView | None:
