@@ -865,16 +865,17 @@ def _read_where_unsure(image: np.ndarray, level: np.ndarray, belt: np.ndarray, u
     views read its 60 mm box 1.5 mm high, and the tests' dark 60 mm box at 10 deg was 0.12 mm off in
     its first frame with its height given. (In the tests' small view, the belt's level beside its 10 mm
     box's edges where the reference was unsure: 1.7 grey levels high on average, 0.0 now.)"""
-    if not ((unsure > 0) & (belt > 0)).any():
+    unsure, belt = unsure > 0, belt > 0
+    if not (unsure & belt).any():
         return level
     # The belt pixels beyond the unsure ones count too (their reference holds; the stand-in was carried in
     # from them, so it is off by less near them).
-    weight = (belt > 0).astype(np.float32)
+    weight = belt.astype(np.float32)
     off = cv2.GaussianBlur((image.astype(np.float32) - level) * weight, (0, 0), _UNSURE_SIGMA_PX)
     spread = cv2.GaussianBlur(weight, (0, 0), _UNSURE_SIGMA_PX)
     read = spread > _UNSURE_MIN_WEIGHT
     off[read] /= spread[read]
-    return np.where((unsure > 0) & read, level + off, level).astype(np.float32)
+    return np.where(unsure & read, level + off, level).astype(np.float32)
 
 
 def _boundary_crossings(img8: np.ndarray, belt: np.ndarray, inside: np.ndarray, half_window: int,
