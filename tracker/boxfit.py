@@ -96,6 +96,8 @@ class BoxFit:
     # face).
     residuals_px: np.ndarray | None = field(default=None, compare=False)
     kept: np.ndarray | None = field(default=None, compare=False)
+    # How wide the end face and the long face the camera sees are in the image (px; 0: not seen).
+    side_widths_px: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -329,9 +331,11 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
         inlying = np.ones(len(every), dtype=bool) if isinstance(keep, slice) else keep
     else:
         every = None
+    widths = tuple(map(float, _side_widths_px(*camera.faces(params), px_per_norm))) if params[_H] > 0 else (0.0, 0.0)
     x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0
+        widths = widths[::-1]
         size_cov = None if size_cov is None else size_cov[::-1, ::-1]
         own = None if own is None else own[::-1]
         if info[0] is not None:
@@ -342,7 +346,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
             shades = _swapped(shades)
     rect = Rect(float(x), float(y), wrap_angle_deg(float(angle)), float(length), float(width))
     return BoxFit(rect, float(params[_H]), rms, size_cov, *info, len(windows),
-                  None if own is None else (float(own[0]), float(own[1])), shades, every, inlying)
+                  None if own is None else (float(own[0]), float(own[1])), shades, every, inlying, widths)
 
 
 def comparable_ms_px2(fits: list[BoxFit], sum_sigma_px: float) -> list[float]:
@@ -350,9 +354,30 @@ def comparable_ms_px2(fits: list[BoxFit], sum_sigma_px: float) -> list[float]:
     some fit kept, each counted at most _TRIM_SIGMAS sum sigmas: a window a fit drops and another
     explains counts against the one, while one that every fit drops is no box's (a speck, a textured
     belt's knurl under it) and counts for none."""
+    squares = _comparable_squares(fits, sum_sigma_px)
+    return [float(np.mean(sq)) if sq.size else math.inf for sq in squares]
+
+
+def comparable_costs_px2(fits: list[BoxFit], sum_sigma_px: float, size_prior: SizePrior | None) -> list[float]:
+    """Each fit's sum of squares (px^2) over the windows comparable_ms_px2 counts, and how far its size
+    lies from ``size_prior`` (None: not lent), weighed as fit_box weighs it: what two fits of one view lent
+    one size are compared by."""
+    costs = []
+    for fit, squares in zip(fits, _comparable_squares(fits, sum_sigma_px), strict=True):
+        cost = float(np.sum(squares)) if squares.size else math.inf
+        if size_prior is not None:
+            off = ((fit.rect.length_mm - size_prior.length_mm) / size_prior.length_sigma_mm,
+                   (fit.rect.width_mm - size_prior.width_mm) / size_prior.width_sigma_mm)
+            cost += sum_sigma_px**2 * (off[0] ** 2 + off[1] ** 2)
+        costs.append(cost)
+    return costs
+
+
+def _comparable_squares(fits: list[BoxFit], sum_sigma_px: float) -> list[np.ndarray]:
+    """Each fit's squared residuals (px^2) over the windows some fit kept, capped (see comparable_ms_px2)."""
     some = np.any([f.kept for f in fits], axis=0)
     cap = (_TRIM_SIGMAS * sum_sigma_px) ** 2
-    return [float(np.mean(np.minimum(f.residuals_px[some] ** 2, cap))) if some.any() else math.inf for f in fits]
+    return [np.minimum(f.residuals_px[some] ** 2, cap) for f in fits]
 
 
 def _side_widths_px(polygons: np.ndarray, kinds: np.ndarray, px_per_norm: float) -> np.ndarray:

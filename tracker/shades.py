@@ -45,12 +45,20 @@ class FaceShades:
     shades: tuple[float, float, float, float]
     sigma: tuple[float, float, float, float]
     reference_deg: tuple[float, float] | None = None
+    # Whether a view has told each face's shade itself (not only through the face opposite, nor not at all).
+    told: tuple[bool, bool, bool, bool] = (True, True, True, True)
 
     def facing(self, facing_deg: tuple[float, float] | None) -> ShadePrior:
         """The shades of the end face and the long face whose outward normals point ``facing_deg`` (deg;
         None: the first of each pair)."""
         end, long = _slots(facing_deg, self.reference_deg)
         return ShadePrior((self.shades[end], self.shades[2 + long]), (self.sigma[end], self.sigma[2 + long]))
+
+    def told_facing(self, facing_deg: tuple[float, float] | None) -> tuple[bool, bool]:
+        """Whether a view has told the shade of the end face and of the long face facing ``facing_deg``
+        itself (see facing)."""
+        end, long = _slots(facing_deg, self.reference_deg)
+        return self.told[end], self.told[2 + long]
 
 
 class ShadeEstimate:
@@ -110,7 +118,8 @@ class ShadeEstimate:
         shades, sigma = np.full(4, 0.5), np.full(4, math.inf)
         shades[known] = solved[2:]
         sigma[known] = np.maximum(np.sqrt(np.maximum(np.diag(cov)[2:], 0.0)), self._cfg.known_shade_sigma)
-        return FaceShades(tuple(map(float, shades)), tuple(map(float, sigma)), self._reference_deg)
+        return FaceShades(tuple(map(float, shades)), tuple(map(float, sigma)), self._reference_deg,
+                          tuple(map(bool, told)))
 
 
 def _slots(facing_deg: tuple[float, float] | None, reference_deg: tuple[float, float] | None) -> tuple[int, int]:
