@@ -96,7 +96,8 @@ class BoxFit:
     # face).
     residuals_px: np.ndarray | None = field(default=None, compare=False)
     kept: np.ndarray | None = field(default=None, compare=False)
-    # How wide the end face and the long face the camera sees are in the image (px; 0: not seen).
+    # With tell_shades: how wide the end face and the long face the camera sees are in the image (px; 0:
+    # not seen, or not told).
     side_widths_px: tuple[float, float] = (0.0, 0.0)
 
 
@@ -298,12 +299,13 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     # Every window's residual at the fit's box (``r`` holds those it kept), for the shades and the caller.
     wanted = tell_shades or keep_residuals
     every = r if isinstance(keep, slice) else (sums(params[None])[0] if wanted else None)
-    shades = None
+    shades, side_widths = None, (0.0, 0.0)
     if tell_shades and params[_H] > 0 and len(r) > len(free) + 2:
         polygons, kinds = camera.faces(params)
         # The sums along one side may share an error of sum_sigma_px (the belt's level under them, the
         # blur): a face w px wide tells its shade no better than sum_sigma_px / w.
         widths = _side_widths_px(polygons, kinds, px_per_norm)
+        side_widths = (float(widths[0]), float(widths[1]))
         floor = (sum_sigma_px / np.maximum(widths, 1e-9)) ** 2
 
         def told_over(which: np.ndarray | slice) -> ViewShades:
@@ -331,11 +333,10 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
         inlying = np.ones(len(every), dtype=bool) if isinstance(keep, slice) else keep
     else:
         every = None
-    widths = tuple(map(float, _side_widths_px(*camera.faces(params), px_per_norm))) if params[_H] > 0 else (0.0, 0.0)
     x, y, angle, length, width = params[:5]
     if width > length:
         length, width, angle = width, length, angle + 90.0
-        widths = widths[::-1]
+        side_widths = side_widths[::-1]
         size_cov = None if size_cov is None else size_cov[::-1, ::-1]
         own = None if own is None else own[::-1]
         if info[0] is not None:
@@ -346,7 +347,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
             shades = _swapped(shades)
     rect = Rect(float(x), float(y), wrap_angle_deg(float(angle)), float(length), float(width))
     return BoxFit(rect, float(params[_H]), rms, size_cov, *info, len(windows),
-                  None if own is None else (float(own[0]), float(own[1])), shades, every, inlying, widths)
+                  None if own is None else (float(own[0]), float(own[1])), shades, every, inlying, side_widths)
 
 
 def comparable_ms_px2(fits: list[BoxFit], sum_sigma_px: float) -> list[float]:
