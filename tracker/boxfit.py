@@ -206,7 +206,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
             size_prior: SizePrior | None = None, sum_sigma_px: float = 0.1, converged_steps: float = CONVERGED_STEPS,
             shade_prior: ShadePrior | None = None, tell_shades: bool = False,
             keep_residuals: bool = False, keep_model_errors: bool = False, near: bool = False,
-            model_sigma_px: float = 0.0) -> BoxFit | None:
+            model_sigma_px: float = 0.0, height_span_mm: tuple[float, float] = (0.0, 0.0)) -> BoxFit | None:
     """The footprint (and with ``free_height`` the height, from ``height_mm`` on) whose box best
     explains ``windows``, or None when the fit's RMS residual exceeds ``max_rms_px``. ``points_norm``:
     the edge points (Nx2, normalised) that bring the box near first; ``px_per_norm``: the focal
@@ -222,7 +222,9 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
     near the part's shape (a box of a height tried, a view's own shape); with ``near`` the ``start``
     (and ``height_mm``) is already this view's fit (a pose): only the sums' stages run, their shades
     solved from the start (see measure.Measurer._own_shape); ``model_sigma_px``: the box model's own error
-    on the sums, which bounds how surely the view tells its height (see view_information)."""
+    on the sums, which bounds how surely the view tells its height (see view_information);
+    ``height_span_mm``: how far below and above ``height_mm`` the box may be (a vote's height tried
+    stands for those halfway to its neighbours), over which ViewShades.outside is judged."""
     free = [*_FOOTPRINT, *([_H] if free_height else [])]
     floor_px = _TRIM_SIGMAS * sum_sigma_px if keep_model_errors else 0.0
     params = box_params(start, height_mm)
@@ -315,7 +317,7 @@ def fit_box(camera: BoxCamera, points_norm: np.ndarray, windows: EdgeWindows, st
                              shade_hold, bounds)[1][0]
             at = sums(params[None], which, solved)[0]
             return _view_shades(lambda p, s: sums(p, which, s), params, solved, at, free, floor,
-                                widths >= _OUTSIDE_MIN_WIDTH_PX, bounds)
+                                widths >= _OUTSIDE_MIN_WIDTH_PX, bounds, height_span_mm)
 
         # The shades are told over every window within _TRIM_SIGMAS sum sigmas, not only those the fit
         # kept: a fit lent shades drops the windows of a sliver they do not explain, and the rest tell
@@ -394,7 +396,8 @@ def _side_widths_px(polygons: np.ndarray, kinds: np.ndarray, px_per_norm: float)
 
 
 def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarray, free: list[int],
-                 floor: np.ndarray, wide: np.ndarray, bounds: ShadeBounds) -> ViewShades:
+                 floor: np.ndarray, wide: np.ndarray, bounds: ShadeBounds,
+                 height_span_mm: tuple[float, float] = (0.0, 0.0)) -> ViewShades:
     """What one view tells of its side shades on its own: a Gauss-Newton step on the sums alone from the
     fit's result (``params``, and the ``shades`` solved there, which a prior may have held), the box's
     ``free`` parameters marginalised out (the pose and size differ from view to view; a sliver's shade
@@ -402,7 +405,8 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
     ``r`` theirs at the fit's result; ``floor``: the least variance of each (end faces, long faces);
     ``wide``: whether each is wide enough to tell a shade no side has (ViewShades.outside). A kind of
     face the view does not show, or whose step leaves the shades ``bounds.told``, gets an infinite
-    variance."""
+    variance. A shade is outside only if it would be at every height within ``height_span_mm`` (below,
+    above) of the box's."""
     box_jac = (residuals(params + _difference_steps(free, len(params)), shades) - r) / _STEP[free][:, None]
     shade_jac = np.stack([(residuals(params[None], shades + d)[0] - r) / _SHADE_STEP for d in np.eye(2) * _SHADE_STEP])
     jac = np.vstack([box_jac, shade_jac]).T
@@ -426,7 +430,16 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
     # at 0.1 and stepped to 3.0 +- 0.9, flagged its own height and the vote chose 20 mm).
     near = np.abs(own - shades) <= bounds.high - bounds.low
     (possible_from, possible_to), (told_from, told_to) = bounds.possible, bounds.told
-    outside = wide & near & ((own + margin < possible_from) | (own - margin >= possible_to))
+    # The shades a box within ``height_span_mm`` of this height would tell (linearly): a height tried
+    # a few mm off the part's reads a wide face's shade far off (a 46.7 mm box fitted at 50 mm: its
+    # faces 0.08 for 0.47, as dark as the belt), and it is the height, not the shape, that is wrong.
+    lowest, highest = own.copy(), own.copy()
+    if any(height_span_mm) and _H not in free and shown.any():
+        h_jac = (residuals((params + np.eye(len(params))[_H] * _STEP[_H])[None], shades)[0] - r) / _STEP[_H]
+        per_mm = -(np.linalg.pinv(normal) @ (jac.T @ h_jac))[n:]
+        below, above = own - per_mm * height_span_mm[0], own + per_mm * height_span_mm[1]
+        lowest, highest = np.minimum(own, np.minimum(below, above)), np.maximum(own, np.maximum(below, above))
+    outside = wide & near & ((highest + margin < possible_from) | (lowest - margin >= possible_to))
     variances[~(variances > 0) | (own < told_from) | (own >= told_to)] = math.inf
     return ViewShades((float(own[0]), float(own[1])), (float(variances[0]), float(variances[1])),
                       (bool(outside[0]), bool(outside[1])), *joint, possible=bounds.possible)

@@ -543,7 +543,13 @@ class Measurer:
         # windows its knurl disturbs than a box's, whose side shades take some of it up (the tests' flat
         # parts on a knurled belt led at 2.5-10 mm for most of their crossing: 0.64 mm off, 0.37 with
         # each fit's own RMS).
-        fits = [(h, fit(h, tell_shades=tell and h > 0, keep_residuals=sharp, keep_model_errors=True))
+        # Each stands for the heights halfway to its neighbours: whether its box needs a side no part has
+        # is judged over them (see boxfit._view_shades).
+        ordered = sorted(heights_mm)
+        spans = {h: (0.5 * (h - ordered[max(k - 1, 0)]), 0.5 * (ordered[min(k + 1, len(ordered) - 1)] - h))
+                 for k, h in enumerate(ordered)}
+        fits = [(h, fit(h, tell_shades=tell and h > 0, keep_residuals=sharp, keep_model_errors=True,
+                        height_span_mm=spans[h]))
                 for h in heights_mm]
         boxes = [f for _, f in fits if f is not None]
         if not boxes:
