@@ -313,8 +313,8 @@ class TrackConfig:
     # A view whose own shape disagrees with the estimate by more than this chi-square (3 degrees of
     # freedom) is left out; this many in a row, and the height is voted again. 16 (p = 0.001): at 25,
     # one view near the far edge claiming 7.5 +- 0.41 mm of a 10 mm box (chi-square 20) was let in and
-    # moved it 0.47 mm (bench/heights_random.py --side-light scene 21; on five random sets +3 scenes,
-    # -1, docs/HISTORY.md).
+    # moved it 0.47 mm (bench/heights_random.py --side-light scene 21; over the random sets 5 scenes
+    # in, 2 out, docs/HISTORY.md).
     view_gate_chi2: float = 16.0
     view_gate_frames: int = 10
     # The height is converged once its 1-sigma uncertainty is below this (mm) over at least this many
