@@ -161,6 +161,8 @@ class Measurer:
         self._box_camera = BoxCamera(mapper.calibration)
         # Normalised coordinates -> mm on the plane of a box's top, for each height the vote tries.
         self._plane_homographies: dict[float, np.ndarray] = {}
+        # Each height the vote tries stands for those halfway to its neighbours (see _trials).
+        self._height_spans_mm = _height_spans(config.height_starts_mm)
         # Parts are boxes with side faces (a height given or estimated), not flat rectangles.
         self._boxes = config.part_height_mm > 0 or config.estimate_height
         self._focal_px = float(mapper.calibration.camera_matrix[0, 0])
@@ -382,11 +384,10 @@ class Measurer:
         tell_shades = cfg.learn_shades and sharp
         # The track's shades of the side faces this view shows (those on the camera's side of where the
         # part is expected).
-        shades, untold = None, (True, True)
+        shades, facing = None, None
         if known is not None and known.shades is not None:
             facing = self._box_camera.facing_deg(np.array([known.x_mm, known.y_mm, rect.angle_deg]))
             shades = known.shades.facing(facing)
-            untold = tuple(not told for told in known.shades.told_facing(facing))
 
         def fit(height_mm: float, start: Rect | None = None, **kwargs) -> BoxFit | None:
             # From ``start``, or the outline measured on the plane of its top (where the measurement maps it
@@ -406,6 +407,7 @@ class Measurer:
             told = dict(size_prior=self._size_of(known), tell_shades=tell_shades and cfg.part_height_mm > 0,
                         keep_residuals=True)
             pose = fit(cfg.part_height_mm, shade_prior=shades, **told)
+            untold = (True, True) if shades is None else tuple(not t for t in known.shades.told_facing(facing))
             if told["tell_shades"] and self._lit_untold(pose, shades, untold, windows.shade_bounds):
                 # Its track is to learn shades and no view has told those of a face this one shows: these
                 # views seed them (see _lit_as_top).
@@ -431,7 +433,7 @@ class Measurer:
             pose = fit(lead, shade_prior=shades, tell_shades=tell_shades)
             return self._own_shape(pose, fit, known.refine, lead, sharp), ()
         self._votes_left -= 1
-        boxes, trials = self._trials(fit, rect, windows, cfg.height_starts_mm)
+        boxes, trials = self._trials(fit, rect, windows)
         if lead == 0.0 or not boxes:
             # Flat leads the vote: the pose is the plain measurement's (as with no box at all: a
             # cylinder lying down, a bag).
@@ -531,9 +533,8 @@ class Measurer:
             info, vec = told_alike(views[best], views[1 - best])
         return replace(pose, shape_info=info, shape_vec=vec)
 
-    def _trials(self, fit, rect: Rect, windows: EdgeWindows,
-                heights_mm: tuple[float, ...]) -> tuple[list[BoxFit], tuple[HeightTrial, ...]]:
-        """A box of each height, its size free: those that fit, and the trials."""
+    def _trials(self, fit, rect: Rect, windows: EdgeWindows) -> tuple[list[BoxFit], tuple[HeightTrial, ...]]:
+        """A box of each height of measure.height_starts_mm, its size free: those that fit, and the trials."""
         cfg = self.config
         sharp = windows.blur_px == 0
         # Their shades: for the vote's check, and for the track to learn from the view that decides it.
@@ -545,12 +546,9 @@ class Measurer:
         # each fit's own RMS).
         # Each stands for the heights halfway to its neighbours: whether its box needs a side no part has
         # is judged over them (see boxfit._view_shades).
-        ordered = sorted(heights_mm)
-        spans = {h: (0.5 * (h - ordered[max(k - 1, 0)]), 0.5 * (ordered[min(k + 1, len(ordered) - 1)] - h))
-                 for k, h in enumerate(ordered)}
         fits = [(h, fit(h, tell_shades=tell and h > 0, keep_residuals=sharp, keep_model_errors=True,
-                        height_span_mm=spans[h]))
-                for h in heights_mm]
+                        height_span_mm=self._height_spans_mm[h]))
+                for h in cfg.height_starts_mm]
         boxes = [f for _, f in fits if f is not None]
         if not boxes:
             return [], ()
@@ -747,6 +745,14 @@ def _edge_points_of(rows: _Crossings, cols: _Crossings, levels: tuple) -> np.nda
     """The edge points (Nx2: x, y in the examined window) of the row and column crossings, each read
     against its level (per window, or one)."""
     return np.concatenate([rows.points(levels[0]), cols.points(levels[1])[:, ::-1]])
+
+
+def _height_spans(heights_mm: tuple[float, ...]) -> dict[float, tuple[float, float]]:
+    """How far below and above each height tried the heights it stands for reach: halfway to its
+    neighbours (none beyond the lowest and the highest)."""
+    ordered = sorted(heights_mm)
+    return {h: (0.5 * (h - ordered[max(k - 1, 0)]), 0.5 * (ordered[min(k + 1, len(ordered) - 1)] - h))
+            for k, h in enumerate(ordered)}
 
 
 def told_alike(best: BoxFit, other: BoxFit) -> tuple[np.ndarray, np.ndarray]:
