@@ -436,7 +436,7 @@ def _view_shades(residuals, params: np.ndarray, shades: np.ndarray, r: np.ndarra
         # are too: a height tried a few mm off the part's reads a wide face's shade far off (a 46.7 mm
         # box fitted at 50 mm: its faces 0.08 for 0.47, as dark as the belt), and it is the height, not
         # the shape, that is wrong. (Worked out only where needed: 3-4 % of auto's time if always.)
-        h_jac = (residuals((params + np.eye(len(params))[_H] * _STEP[_H])[None], shades)[0] - r) / _STEP[_H]
+        h_jac = (residuals(params + _difference_steps([_H], len(params)), shades)[0] - r) / _STEP[_H]
         per_mm = -(np.linalg.pinv(normal) @ (jac.T @ h_jac))[n:]
         ends = np.stack([own, own - per_mm * height_span_mm[0], own + per_mm * height_span_mm[1]])
         lowest, highest = ends.min(axis=0), ends.max(axis=0)
