@@ -7,6 +7,7 @@ import errno
 import json
 import os
 import shutil
+import stat
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from plc.options import PlcOptions
 from plc.sim import PlcSimulator
 from plc.writer import PlcWriter
 from tracker import pose_sink
+from tracker.calibration import load, save
 from tracker.cli import main
 from tracker.health import FAULT_POSES, Health
 from tracker.outputs import PublishOnFirstFrame, StagedFile
@@ -131,6 +133,28 @@ def test_outputs_take_their_name_once_the_first_frame_is_processed(scene_dir, tm
     assert [p["frame"] for p in lines] == [0, 1, 2]
     assert record.read_bytes() != record_before and main(["replay", str(record), "--check"]) == 0
     assert not [p for p in tmp_path.iterdir() if ".partial" in p.name]
+
+
+def test_outputs_have_a_new_files_permissions_and_a_replaced_file_keeps_its_own(scene_dir, tmp_path):
+    # Written to a private temporary file (mkstemp's 0600) and renamed into place, a pose file or a
+    # calibration stayed unreadable to the cell's other users (the PLC programmer's, a service's).
+    poses, record, calib = tmp_path / "p.jsonl", tmp_path / "r.mcap", tmp_path / "c.yaml"
+    old_mask = os.umask(0o022)
+    try:
+        assert main(_args(scene_dir, "--poses", str(poses), "--record", str(record), "--max-frames", "2")) == 0
+        save(load(scene_dir / "calibration.yaml"), calib)
+        assert [stat.S_IMODE(p.stat().st_mode) for p in (poses, record, calib)] == [0o644] * 3
+        os.umask(0o027)
+        for path, mode in ((poses, 0o664), (record, 0o600), (calib, 0o640)):
+            path.chmod(mode)
+        assert main(_args(scene_dir, "--poses", str(poses), "--record", str(record), "--max-frames", "2")) == 0
+        save(load(scene_dir / "calibration.yaml"), calib)
+        assert [stat.S_IMODE(p.stat().st_mode) for p in (poses, record, calib)] == [0o664, 0o600, 0o640]
+        fresh = tmp_path / "fresh.jsonl"
+        assert main(_args(scene_dir, "--poses", str(fresh), "--max-frames", "1")) == 0
+        assert stat.S_IMODE(fresh.stat().st_mode) == 0o640
+    finally:
+        os.umask(old_mask)
 
 
 def test_staged_file_is_removed_when_nothing_was_processed(tmp_path):

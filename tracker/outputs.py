@@ -16,6 +16,7 @@ import re
 import tempfile
 from pathlib import Path
 
+from tracker.atomic import replacing_mode
 from tracker.errors import BadInput
 
 
@@ -89,6 +90,7 @@ class StagedFile:
         except OSError as exc:
             raise BadInput(f"{option} {target}: cannot write {what}: {exc.strerror}") from None
         os.close(fd)
+        os.chmod(self.path, replacing_mode(target))
         self.published = False
 
     def publish(self) -> None:

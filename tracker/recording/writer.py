@@ -26,6 +26,7 @@ from typing import Any
 
 from tracker import __version__
 from tracker import calibration as calib_io
+from tracker.atomic import replacing_mode
 from tracker.calibration import Calibration
 from tracker.config import TrackerConfig
 from tracker.errors import BadInput, RecordingError
@@ -175,7 +176,7 @@ class Recorder:
         try:
             fd, temporary = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent or ".")
             os.close(fd)
-            os.chmod(temporary, 0o644)  # as a new file would be; mkstemp makes it private
+            os.chmod(temporary, replacing_mode(target))  # mkstemp makes it private
             out = RawFile(temporary)
         except OSError as exc:
             raise BadInput(f"--record {path}: cannot write the recording: {exc.strerror}") from None
