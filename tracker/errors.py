@@ -36,5 +36,11 @@ class SourceLost(TrackerError):
     """A live source (camera) stopped delivering frames mid-run."""
 
 
+class StoppedMidRun(TrackerError):
+    """Bad input (a frame that cannot be read, or of another size) met after frames were processed:
+    the outputs hold those frames, so it is no longer "bad input, nothing written" (exit 1, as a
+    camera lost mid-run)."""
+
+
 class RecordingError(TrackerError):
     """A recording cannot be written or read."""

@@ -15,7 +15,7 @@ from typing import Protocol, TextIO
 
 import numpy as np
 
-from tracker.errors import FrameSizeError, SourceLost
+from tracker.errors import BadInput, FrameSizeError, SourceLost, StoppedMidRun
 from tracker.health import FAULT_CAMERA_LOST, FAULT_FRAME_SIZE, FAULT_OVERRUN, FAULT_SCENE, FAULT_TEXT, Health
 from tracker.pipeline import Pipeline
 from tracker.poses import FrameResult
@@ -224,8 +224,14 @@ class Runner:
             health.camera_ok = False
             health.set_fault(FAULT_CAMERA_LOST)
             raise
-        except FrameSizeError:
-            raise
+        except BadInput as exc:
+            if not summary.frames:
+                raise  # nothing processed, nothing written: bad input (exit 2)
+            if not isinstance(exc, FrameSizeError):
+                health.camera_ok = False
+                health.set_fault(FAULT_CAMERA_LOST)
+            raise StoppedMidRun(f"{exc}; the run stopped there, after {summary.frames} frames "
+                                f"(its outputs hold them)") from None
         except Exception:
             # Any other end of the run (a damaged file, a bad frame, a bug): the PLC's final
             # block must not say "no fault" while the poses have stopped coming.
