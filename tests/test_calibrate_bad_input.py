@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import cv2
 import numpy as np
 import pytest
@@ -120,3 +122,47 @@ def test_belt_needs_intrinsics(tmp_path, capsys):
     cv2.imwrite(str(image), belt_view())
     _fails(capsys, _belt(tmp_path / "none.yaml", str(image), "--pattern", "9x6", "--square", "40"), "none.yaml")
     _fails(capsys, ["calibrate", "show", str(tmp_path / "none.yaml")], "none.yaml", "not found")
+
+
+def test_outputs_that_cannot_be_kept_are_refused_before_any_work(tmp_path, views, cell, capsys):
+    # Found by walking through the commands: an existing file as the previews' folder, or a folder or
+    # a .txt as the belt's preview, raised a traceback after the calibration had been written.
+    calib, image = cell
+    before = calib.read_bytes()
+    out, rep, taken = tmp_path / "new.yaml", tmp_path / "r.json", tmp_path / "taken.png"
+    taken.write_bytes(b"a file")
+    _fails(capsys, _intrinsics(views, out, "--report", str(rep), "--preview", str(taken)), "it is a file")
+    _fails(capsys, _intrinsics(views, out, "--report", str(tmp_path)), "it is a folder")
+    _fails(capsys, _intrinsics(views, out, "--preview", str(tmp_path / "no" / "such")), "does not exist")
+    assert not out.exists() and not rep.exists() and taken.read_bytes() == b"a file"
+    board = [str(image), "--pattern", "9x6", "--square", "40"]
+    (tmp_path / "shots.png").mkdir()
+    _fails(capsys, _belt(calib, *board, "--preview", str(tmp_path / "shots.png")), "it is a folder")
+    _fails(capsys, _belt(calib, *board, "--preview", str(tmp_path / "axes.txt")), "expected a .png")
+    _fails(capsys, ["calibrate", "board", "--pattern", "9x6", "--square", "20", "--out",
+                    str(tmp_path / "shots.png")], "it is a folder")
+    assert calib.read_bytes() == before
+    # A preview that can be written is written, and the calibration with it.
+    preview = tmp_path / "axes.png"
+    assert main(_belt(calib, *board, "--preview", str(preview))) == 0
+    assert cv2.imread(str(preview)) is not None and calib.read_bytes() != before
+    if os.geteuid() != 0:  # root writes in a read-only folder all the same
+        locked = tmp_path / "locked"
+        locked.mkdir(mode=0o555)
+        _fails(capsys, ["calibrate", "board", "--pattern", "9x6", "--square", "20", "--out",
+                        str(locked / "b.png")], "not writable")
+
+
+def test_previews_are_written_when_the_calibration_is_refused(tmp_path, views, capsys):
+    # They show why: the corners found on each view.
+    out, folder = tmp_path / "cam.yaml", tmp_path / "previews"
+    assert main(_intrinsics(views, out, "--max-rms", "0.001", "--preview", str(folder))) == 2
+    assert "exceeds 0.001 px" in capsys.readouterr().err
+    assert not out.exists() and len(list(folder.glob("*.png"))) == len(views)
+
+
+def test_a_capture_that_cannot_start_leaves_no_views_folder(tmp_path, capsys):
+    out = tmp_path / "cap.yaml"
+    _fails(capsys, ["calibrate", "capture", "--source", str(tmp_path / "nothere.mp4"), "--pattern", "9x6",
+                    "--square", "20", "--out", str(out)], "nothere.mp4")
+    assert list(tmp_path.iterdir()) == []

@@ -73,6 +73,16 @@ def check_target(option: str, target: str, what: str) -> str:
     return folder
 
 
+def check_writable(path: Path, what: str) -> None:
+    """BadInput (exit 2) unless ``what`` can be written at ``path``: its folder exists and may be
+    written in (checked before any work, so that none is lost to an output that cannot be kept)."""
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise BadInput(f"{path}: cannot write {what}: the folder {parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise BadInput(f"{path}: cannot write {what}: the folder {parent} is not writable")
+
+
 class StagedFile:
     """A temporary file beside ``target``; ``publish()`` moves it into place, ``discard()`` removes it.
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
 import cv2
@@ -16,7 +17,8 @@ from tracker.calibrate.capture import CaptureSettings
 from tracker.calibrate.images import read_all_same_size, read_grey
 from tracker.calibrate.intrinsics import calibrate_intrinsics
 from tracker.calibrate.settings import DEFAULTS
-from tracker.errors import BadInput
+from tracker.errors import BadInput, TrackerError
+from tracker.outputs import check_writable
 
 CAPTURE = CaptureSettings()
 
@@ -127,14 +129,32 @@ def _check_out(path: str) -> Path:
     out = Path(path)
     if out.suffix.lower() not in calibfile.SUFFIXES:
         raise BadInput(f"{out}: unsupported extension {out.suffix!r}, expected one of {', '.join(calibfile.SUFFIXES)}")
-    _check_dir(out)
+    _check_file(out, "the calibration")
     return out
 
 
-def _check_dir(path: Path) -> None:
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise BadInput(f"{path}: folder {parent} does not exist")
+def _check_file(path: Path, what: str) -> None:
+    """Before any work: ``path`` can take ``what`` (a file name in a folder that exists and may be written)."""
+    if path.is_dir():
+        raise BadInput(f"{path}: cannot write {what}: it is a folder; expected a file name")
+    check_writable(path, what)
+
+
+def _check_preview_file(path: Path) -> None:
+    """Before any work (the calibration is written after it): a PNG file OpenCV can write there."""
+    if path.suffix.lower() != ".png":
+        raise BadInput(f"--preview {path}: expected a .png file name, got {path.suffix or 'no extension'!r}")
+    _check_file(path, "the preview")
+
+
+def _check_preview_folder(path: Path) -> None:
+    """Before any work: a folder for the previews, or a name for one in a folder that exists."""
+    if path.exists() and not path.is_dir():
+        raise BadInput(f"--preview {path}: it is a file; expected a folder for the previews")
+    if not path.exists():
+        check_writable(path, "the previews")
+    elif not os.access(path, os.W_OK | os.X_OK):
+        raise BadInput(f"--preview {path}: cannot write the previews: the folder is not writable")
 
 
 def run_intrinsics(args: argparse.Namespace) -> int:
@@ -170,7 +190,9 @@ def check_intrinsics_args(args: argparse.Namespace) -> tuple[Path, Path | None]:
         raise BadInput(f"--min-views: expected at least 3, got {args.min_views}")
     report_path = Path(args.report) if args.report else None
     if report_path:
-        _check_dir(report_path)
+        _check_file(report_path, "the report")
+    if getattr(args, "preview", None):
+        _check_preview_folder(Path(args.preview))
     return out, report_path
 
 
@@ -180,6 +202,8 @@ def calibrate_and_write(paths: list[str], images: list, pattern, out: Path, repo
     result = calibrate_intrinsics(paths, images, pattern, args.min_views, args.fix_k3, args.detector)
     for line in report.intrinsics_text(result, args.max_rms):
         print(line)
+    if getattr(args, "preview", None):
+        _write_previews(Path(args.preview), result, images, pattern)
     final = result.final
     if final.rms_px > args.max_rms:
         raise BadInput(f"calibration RMS {final.rms_px:.3f} px exceeds {args.max_rms} px (--max-rms): "
@@ -192,19 +216,24 @@ def calibrate_and_write(paths: list[str], images: list, pattern, out: Path, repo
         data = json.dumps(report.intrinsics_json(result, args.max_rms), indent=2).encode()
         report.write_atomic(report_path, data)
         print(f"wrote {report_path}")
-    if getattr(args, "preview", None):
-        folder = Path(args.preview)
-        folder.mkdir(parents=True, exist_ok=True)
-        for view, image in zip(result.views, images, strict=True):
-            colour = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-            if view.corners is not None and view.ids is not None:
-                cv2.aruco.drawDetectedCornersCharuco(colour, view.corners.astype("float32").reshape(-1, 1, 2),
-                                                     view.ids.reshape(-1, 1))
-            elif view.corners is not None:
-                cv2.drawChessboardCorners(colour, pattern.size, view.corners.astype("float32").reshape(-1, 1, 2), True)
-            cv2.imwrite(str(folder / (Path(view.path).stem + ".png")), colour)
-        print(f"wrote {len(result.views)} previews to {folder}")
     return 0
+
+
+def _write_previews(folder: Path, result, images: list, pattern) -> None:
+    """Each view with the corners found drawn on it, as PNG in ``folder`` (checked before any work):
+    written before the calibration is accepted or refused, as they show why."""
+    folder.mkdir(exist_ok=True)
+    for view, image in zip(result.views, images, strict=True):
+        colour = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+        if view.corners is not None and view.ids is not None:
+            cv2.aruco.drawDetectedCornersCharuco(colour, view.corners.astype("float32").reshape(-1, 1, 2),
+                                                 view.ids.reshape(-1, 1))
+        elif view.corners is not None:
+            cv2.drawChessboardCorners(colour, pattern.size, view.corners.astype("float32").reshape(-1, 1, 2), True)
+        path = folder / (Path(view.path).stem + ".png")
+        if not cv2.imwrite(str(path), colour):
+            raise TrackerError(f"{path}: cannot write the preview (disk full?)")
+    print(f"wrote {len(result.views)} previews to {folder}")
 
 
 def run_belt(args: argparse.Namespace) -> int:
@@ -212,7 +241,7 @@ def run_belt(args: argparse.Namespace) -> int:
     calib = calibfile.load(args.calibration, require_belt=False)
     preview = Path(args.preview) if args.preview else None
     if preview:
-        _check_dir(preview)
+        _check_preview_file(preview)
     if preview and not args.image:
         raise BadInput("--preview needs IMAGE (the view to draw on)")
     image = read_grey(args.image) if args.image else None
@@ -236,13 +265,15 @@ def run_belt(args: argparse.Namespace) -> int:
         axis_mm = 2 * pattern.square_mm
     for line in report.belt_text(result, names):
         print(line)
+    if preview:
+        # Before the calibration: a preview that cannot be written leaves the calibration as it was.
+        ok, png = cv2.imencode(".png", draw_preview(image, result, axis_mm))
+        if not ok:
+            raise TrackerError(f"{preview}: cannot encode the preview")
+        report.write_atomic(preview, png.tobytes())
+        print(f"wrote {preview}")
     calibfile.save(result.calibration, target)
     print(f"wrote {target}" + ("" if args.out else " (updated in place)"))
-    if preview:
-        ok = cv2.imwrite(str(preview), draw_preview(image, result, axis_mm))
-        if not ok:
-            raise BadInput(f"{preview}: cannot write the preview (expected a .png file)")
-        print(f"wrote {preview}")
     return 0
 
 
@@ -277,7 +308,7 @@ def run_board(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".png":
         raise BadInput(f"{out}: expected a .png file")
-    _check_dir(out)
+    _check_file(out, "the board")
     sheet = make_sheet(board, args.dpi, args.paper)
     report.write_atomic(out, png_bytes(sheet))
     print(f"wrote {out}: {args.paper} at {args.dpi} dpi; one square prints {sheet.square_mm:.3f} mm "

@@ -18,6 +18,7 @@ from tracker.calibrate.board import Pattern, detect, parse_pattern
 from tracker.calibrate.capture import CaptureSettings, Progress, ViewSelector
 from tracker.calibrate.cli import calibrate_and_write, check_intrinsics_args
 from tracker.errors import BadInput
+from tracker.outputs import check_writable
 
 
 def run_capture(args: argparse.Namespace) -> int:
@@ -47,6 +48,7 @@ def run_capture(args: argparse.Namespace) -> int:
             if view is not None:
                 view.submit(frame.index, image, corners, selector.progress, selector.cells)
             if kept:
+                views_dir.mkdir(exist_ok=True)  # only now: a capture that keeps no view leaves no folder
                 path = views_dir / f"view_{len(paths):03d}.png"
                 if not cv2.imwrite(str(path), image):
                     raise BadInput(f"{path}: cannot write the view")
@@ -97,13 +99,11 @@ def _settings(args: argparse.Namespace) -> CaptureSettings:
 
 
 def _views_dir(path: Path) -> Path:
-    """A new or empty folder: views of another session are never mixed in or overwritten."""
+    """A new or empty folder (made once the first view is kept): views of another session are never
+    mixed in or overwritten."""
     if path.exists() and (not path.is_dir() or any(path.iterdir())):
         raise BadInput(f"{path}: the views folder exists and is not empty: choose another with --views")
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise BadInput(f"{path}: folder {parent} does not exist")
-    path.mkdir(exist_ok=True)
+    check_writable(path, "the views")
     return path
 
 

@@ -11,6 +11,7 @@ from tracker.atomic import atomic_path
 from tracker.calibrate.belt import BeltResult
 from tracker.calibrate.intrinsics import IntrinsicsResult
 from tracker.calibration import Calibration
+from tracker.errors import TrackerError
 
 
 def intrinsics_text(r: IntrinsicsResult, max_rms_px: float) -> list[str]:
@@ -125,5 +126,9 @@ def show_text(c: Calibration) -> list[str]:
 
 
 def write_atomic(path: Path, data: bytes) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
+    """``data`` as ``path``, whole or not at all; a failure (a full disk) is one line, exit 1."""
+    try:
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(data)
+    except OSError as exc:
+        raise TrackerError(f"{path}: cannot write: {exc.strerror}") from None
