@@ -46,3 +46,21 @@ def test_bad_scale_input_is_one_line_and_writes_nothing(tmp_path, capsys, args, 
     err = capsys.readouterr().err
     assert needle in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_a_belt_pose_is_not_fitted_through_approximate_intrinsics(tmp_path, capsys):
+    # Its focal length is a guess: the pose came out 2518 mm above a belt 700 mm away, and the file lost
+    # the mark that has every part measured flat.
+    import cv2
+    from calib_support import belt_view
+
+    out, image = tmp_path / "approx.yaml", tmp_path / "belt.png"
+    assert main(["calibrate", "scale", "--size", "640x480", "--mm-per-px", "0.5", "--out", str(out)]) == 0
+    assert cv2.imwrite(str(image), belt_view())
+    before = out.read_bytes()
+    capsys.readouterr()
+    assert main(["calibrate", "belt", str(image), "--pattern", "9x6", "--square", "40", "--calibration",
+                 str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "APPROXIMATE" in err[0] and "calibrate the intrinsics first" in err[0], err
+    assert out.read_bytes() == before

@@ -239,6 +239,12 @@ def _write_previews(folder: Path, result, images: list, pattern) -> None:
 def run_belt(args: argparse.Namespace) -> int:
     target = _check_out(args.out or args.calibration)
     calib = calibfile.load(args.calibration, require_belt=False)
+    if calib.approximate:
+        # Its focal length is a guess from a scale and its lens has no distortion: a belt pose fitted
+        # through it came out 2518 mm above a belt 700 mm away, and without the mark that keeps parts flat.
+        raise BadInput(f"{args.calibration}: its intrinsics are APPROXIMATE (from 'calibrate scale': a focal "
+                       f"length guessed from a scale, no lens distortion); a belt pose fitted with them would be "
+                       f"wrong: calibrate the intrinsics first ('calibrate intrinsics', 'capture' or 'import-ros')")
     preview = Path(args.preview) if args.preview else None
     if preview:
         _check_preview_file(preview)
