@@ -67,6 +67,23 @@ def test_evaluate_refuses_swapped_arguments_and_another_scenes_truth(scene_dir, 
     assert "no reported object is near any true part" in capsys.readouterr().err
 
 
+def test_evaluate_names_the_files_line_and_writes_no_nan(scene_dir, tmp_path, capsys):
+    poses = tmp_path / "poses.jsonl"
+    assert main(_run(scene_dir, "--fps", "30", "--poses", str(poses), "--max-frames", "8")) == 0
+    lines = poses.read_text().splitlines()
+    broken = tmp_path / "broken.jsonl"
+    broken.write_text("\n".join(lines[:5] + ['{"frame": 5, "objects": [}'] + lines[6:]) + "\n")
+    capsys.readouterr()
+    assert main(["evaluate", str(broken), str(scene_dir / "truth.jsonl")]) == 2
+    assert "broken.jsonl: line 6: not JSON" in capsys.readouterr().err
+    # Every part-frame within --skip-first: no error to state, and the JSON is JSON (no NaN).
+    assert main(["evaluate", str(poses), str(scene_dir / "truth.jsonl"), "--skip-first", "100", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out, parse_constant=lambda name: pytest.fail(f"{name} in JSON"))
+    assert summary["centroid_mean_mm"] is None and summary["visible_frames"] > 0
+    assert main(["evaluate", str(poses), str(scene_dir / "truth.jsonl"), "--skip-first", "100"]) == 0
+    assert "centroid error: mean none mm" in capsys.readouterr().out
+
+
 class _Terminal(io.StringIO):
     def isatty(self) -> bool:
         return True

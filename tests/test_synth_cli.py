@@ -50,3 +50,26 @@ def test_progress_is_shown_and_help_names_the_frame_pattern(tmp_path):
     helped = subprocess.run([sys.executable, "-m", "tracker", "synth", "--help"], capture_output=True, text=True)
     assert "frames/%05d.png" in helped.stdout and "%%" not in helped.stdout
 
+
+
+def test_a_scene_is_never_written_over_another_unless_forced_and_then_wholly(tmp_path, capsys):
+    # Written over, a 40-frame scene given 3 new frames kept 37 old ones beside the new truth.
+    out = tmp_path / "scene"
+    assert main(["synth", "nadir", "--frames", "6", "--size", "160x120", "--out", str(out), "--quiet"]) == 0
+    truth = (out / "truth.jsonl").read_bytes()
+    capsys.readouterr()
+    assert main(["synth", "nadir", "--frames", "3", "--size", "160x120", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "not empty" in err and "--force" in err and len(err.strip().splitlines()) == 1
+    assert len(list((out / "frames").glob("*.png"))) == 6 and (out / "truth.jsonl").read_bytes() == truth
+    assert main(["synth", "nadir", "--frames", "3", "--size", "160x120", "--out", str(out), "--quiet",
+                 "--force"]) == 0
+    assert sorted(p.name for p in (out / "frames").iterdir()) == ["00000.png", "00001.png", "00002.png"]
+    assert len((out / "truth.jsonl").read_text().splitlines()) == 3
+    # A folder that is not a scene's is not emptied, forced or not.
+    (out / "notes.txt").write_text("mine")
+    assert main(["synth", "nadir", "--frames", "3", "--size", "160x120", "--out", str(out), "--force"]) == 2
+    assert "notes.txt" in capsys.readouterr().err and (out / "notes.txt").read_text() == "mine"
+    assert main(["synth", "nadir", "--frames", "0", "--out", str(tmp_path / "none")]) == 2
+    assert "--frames: expected at least 1, got 0" in capsys.readouterr().err
+    assert not (tmp_path / "none").exists()

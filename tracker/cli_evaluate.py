@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 
 from tracker.errors import BadInput
 from tracker.evaluate import evaluate
-from tracker.poses import read_poses
+from tracker.poses import PoseLineError, read_poses
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -32,8 +33,8 @@ def _read(path: str, what: str, truth: bool) -> list[dict]:
         raise BadInput(f"{path}: cannot read: {exc.strerror}") from None
     except UnicodeDecodeError:
         raise BadInput(f"{path}: not a text file; expected {what}") from None
-    except json.JSONDecodeError as exc:
-        raise BadInput(f"{path}: line {exc.lineno}: not JSON ({exc.msg}); expected {what}") from None
+    except PoseLineError as exc:
+        raise BadInput(f"{path}: {exc}; expected {what}") from None
     for n, frame in enumerate(frames, 1):
         objects = frame.get("objects") if isinstance(frame, dict) else None
         if not isinstance(objects, list) or not isinstance(frame.get("frame"), int):
@@ -56,14 +57,20 @@ def run(args: argparse.Namespace) -> int:
     if acc.visible_frames and acc.missed_frames == acc.visible_frames and acc.false_objects:
         raise BadInput(f"{args.poses}: no reported object is near any true part of {args.truth}: "
                        "is it the truth of the scene these poses were tracked on?")
-    summary = acc.summary()
+    # No measured part-frame (all missed, or all within --skip-first): no error to state. JSON has no
+    # NaN (json.dumps wrote one, which JSON readers refuse): null, and "none" in the text.
+    summary = {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in acc.summary().items()}
     if args.json:
         print(json.dumps(summary))
         return 0
+
+    def mm(key: str, sign: str = "") -> str:
+        return "none" if summary[key] is None else f"{summary[key]:{sign}.3f}"
+
     print(f"fully visible part-frames: {summary['visible_frames']}, missed: {summary['missed_frames']}, "
           f"false objects: {summary['false_objects']}")
-    print(f"centroid error: mean {summary['centroid_mean_mm']:.3f} mm, p95 {summary['centroid_p95_mm']:.3f} mm; "
-          f"along-track bias {summary['along_bias_mm']:+.3f} mm")
-    print(f"angle error: mean {summary['angle_mean_deg']:.3f} deg, p95 {summary['angle_p95_deg']:.3f} deg; "
-          f"length/width max error {summary['length_max_mm']:.3f} / {summary['width_max_mm']:.3f} mm")
+    print(f"centroid error: mean {mm('centroid_mean_mm')} mm, p95 {mm('centroid_p95_mm')} mm; "
+          f"along-track bias {mm('along_bias_mm', '+')} mm")
+    print(f"angle error: mean {mm('angle_mean_deg')} deg, p95 {mm('angle_p95_deg')} deg; "
+          f"length/width max error {mm('length_max_mm')} / {mm('width_max_mm')} mm")
     return 0

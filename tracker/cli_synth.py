@@ -6,6 +6,7 @@ import argparse
 import dataclasses
 import json
 import os
+import re
 import sys
 from pathlib import Path
 from typing import TextIO
@@ -30,7 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     out.add_argument("--out", help="output folder")
     out.add_argument("--record", metavar="OUT.mcap",
                      help="instead of files, track the scene and record it (how recordings/demo.mcap is made)")
-    p.add_argument("--force", action="store_true", help="replace an existing --record file")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing --record file, or the scene in an existing --out folder")
     p.add_argument("--zstd-level", type=int, metavar="N",
                    help="with --record, compress harder than a live recording does (default: the recorder's, 1; "
                         "`make demo` uses 19: a third smaller, twice the time)")
@@ -54,6 +56,8 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def scene_from_args(args: argparse.Namespace) -> SceneSpec:
+    if args.frames is not None and args.frames < 1:
+        raise BadInput(f"--frames: expected at least 1, got {args.frames}")
     scene = preset(args.preset)
     changes = {k: v for k, v in (("n_frames", args.frames), ("noise_sigma", args.noise),
                                  ("flicker", args.flicker), ("seed", args.seed)) if v is not None}
@@ -113,10 +117,37 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         raise BadInput("synth: give --out DIR (frames on disk) or --record OUT.mcap")
-    if args.zstd_level is not None or args.force:
-        raise BadInput("synth: --zstd-level and --force go with --record")
-    pattern = write_scene(scene, Path(args.out), progress_out)
+    if args.zstd_level is not None:
+        raise BadInput("synth: --zstd-level goes with --record")
+    out = Path(args.out)
+    _check_out_folder(out, args.force)
+    pattern = write_scene(scene, out, progress_out)
     print(f"tracker: {scene.n_frames} frames at {scene.fps:g} fps -> {pattern}")
     print(f"tracker: run it with: tracker run --source {pattern} --calibration {Path(args.out) / 'calibration.yaml'} "
           f"--fps {scene.fps:g} --no-plc --poses poses.jsonl")
     return 0
+
+
+def _check_out_folder(out: Path, force: bool) -> None:
+    """``out`` is new or empty, or (``force``) a scene of ours to replace: its old frames are removed
+    first. Written over, a 40-frame scene given 3 new frames kept 37 old ones beside the new truth,
+    and a run over them was tracked against the wrong scene without a word."""
+    if out.exists() and not out.is_dir():
+        raise BadInput(f"--out {out}: it is a file; expected a folder")
+    if not out.is_dir() or not any(out.iterdir()):
+        return
+    if not force:
+        raise BadInput(f"--out {out}: the folder exists and is not empty (give --force to replace the scene in it)")
+    ours = {"frames", "calibration.yaml", "truth.jsonl", "scene.json"}
+    others = sorted(p.name for p in out.iterdir() if p.name not in ours)
+    frames = out / "frames"
+    if frames.is_dir():
+        others += sorted(f"frames/{p.name}" for p in frames.iterdir() if not _FRAME.fullmatch(p.name))
+    if others:
+        raise BadInput(f"--out {out}: holds files that are not a scene's ({', '.join(others[:3])}); "
+                       "choose another folder")
+    for old in frames.glob("*.png") if frames.is_dir() else ():
+        old.unlink()
+
+
+_FRAME = re.compile(r"\d{5,}\.png")

@@ -81,6 +81,22 @@ class FrameResult:
         return json.dumps(self.to_dict(), allow_nan=False, separators=(", ", ": ")) + "\n"
 
 
+class PoseLineError(ValueError):
+    """A line of a pose file that is not JSON; ``line``: its number in the file (from 1)."""
+
+    def __init__(self, line: int, why: str) -> None:
+        super().__init__(f"line {line}: not JSON ({why})")
+        self.line = line
+
+
 def read_poses(path: str | os.PathLike) -> list[dict]:
+    """Each line of a JSON Lines file (blank lines skipped); PoseLineError names the file's line."""
+    frames = []
     with open(path, encoding="utf-8") as f:
-        return [json.loads(line) for line in f if line.strip()]
+        for n, line in enumerate(f, 1):
+            if line.strip():
+                try:
+                    frames.append(json.loads(line))
+                except json.JSONDecodeError as exc:
+                    raise PoseLineError(n, exc.msg) from None
+    return frames
