@@ -153,6 +153,7 @@ def test_the_printed_board_is_true_to_scale_and_detected(tmp_path, capsys):
     (["--board", "charuco:11x8:20:DICT_5X5_100"], "expected charuco:COLSxROWS"),
     (["--board", "charuco:30x30:20:14:DICT_4X4_50"], "has 50 markers"),
     (["--board", "charuco:11x8:40:28:DICT_5X5_100"], "A4 is"),
+    (["--pattern", "9x6", "--square", "25"], "--pattern 9x6 --square 25: needs"),  # the options given
     (["--board", "charuco:11x8:20:14:DICT_5X5_100", "--pattern", "9x6"], "not both"),
 ])
 def test_bad_boards_are_one_line_exit_2(tmp_path, capsys, argv, message):

@@ -85,6 +85,18 @@ def test_bad_input_is_one_line_and_exit_2(scene_dir, capsys, args, message):
     assert message in err and len(err.strip().splitlines()) == 1
 
 
+def test_a_folder_where_a_file_is_expected_is_called_a_folder(tmp_path, scene_dir, capsys):
+    # Not "not found": the user sees the folder is there.
+    (tmp_path / "cell.yaml").mkdir()
+    (tmp_path / "clip.mp4").mkdir()
+    assert main(["run", "--source", str(tmp_path / "clip.mp4"), "--calibration", str(tmp_path / "cell.yaml"),
+                 "--no-plc"]) == 2
+    assert "cell.yaml: is a folder; expected a calibration file" in capsys.readouterr().err
+    assert main(["run", "--source", str(tmp_path / "clip.mp4"), "--calibration", str(scene_dir / "calibration.yaml"),
+                 "--no-plc"]) == 2
+    assert "clip.mp4: is a folder; expected a video file" in capsys.readouterr().err
+
+
 def test_corrupt_video_is_bad_input(tmp_path, scene_dir, capsys):
     bogus = tmp_path / "video.mp4"
     bogus.write_bytes(b"\x00garbage" * 100)

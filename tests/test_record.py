@@ -135,9 +135,12 @@ def test_check_names_the_first_differing_frame_and_field(recorded, tmp_path, cap
     err = capsys.readouterr().err
     assert f"frame {changed}" in err and "y_mm" in err
     # A tolerance (for replays on another CPU type) accepts small differences, not large ones.
-    assert main(["replay", str(tampered), "--check", "--tolerance", "0.6"]) == 0
+    capsys.readouterr()
+    assert main(["replay", str(tampered), "--check", "--tolerance", "0.6", "--quiet"]) == 0
+    assert "poses within 0.6 of the live run" in capsys.readouterr().out  # not "identical"
     assert main(["replay", str(tampered), "--check", "--tolerance", "0.4"]) == 1
     assert main(["replay", str(tampered), "--check", "--tolerance", "-1"]) == 2
+    assert main(["replay", str(tampered), "--tolerance", "0.6"]) == 2  # a tolerance means nothing unchecked
     assert first_difference({"a": [1, {"b": 2}]}, {"a": [1, {"b": 3}]}) == "a[1].b: live 2, replay 3"
 
 
@@ -283,7 +286,13 @@ def test_unreadable_recording_is_bad_input(tmp_path, capsys):
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"not an mcap file at all")
     assert main(["replay", str(junk)]) == 2
-    assert "junk.mcap" in capsys.readouterr().err
+    assert "junk.mcap: not an MCAP recording" in capsys.readouterr().err  # not "cut before its header"
+    assert main(["replay", str(tmp_path)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    assert main(["replay", str(empty)]) == 2
+    assert "empty.mcap: not a readable recording (it ends at byte 0" in capsys.readouterr().err
 
 
 def _chunk_starts(path) -> list[int]:

@@ -225,8 +225,12 @@ def load(path: str | os.PathLike, require_belt: bool = True) -> Calibration:
     """Read and validate a calibration file; raise CalibrationError naming file and node."""
     path = Path(path)
     _check_suffix(path)
+    if path.is_dir():
+        raise CalibrationError(f"{path}: is a folder; expected a calibration file")
     if not path.is_file():
         raise CalibrationError(f"{path}: calibration file not found")
+    if not os.access(path, os.R_OK):
+        raise CalibrationError(f"{path}: cannot read the calibration file: permission denied")
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     except (cv2.error, SystemError) as exc:

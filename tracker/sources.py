@@ -74,6 +74,9 @@ class FrameSource:
 class VideoFileSource(FrameSource):
     def __init__(self, path: str, fps: float | None = None) -> None:
         self.name = path
+        if os.path.isdir(path):
+            raise SourceError(f"{path}: is a folder; expected a video file, a camera index or an image pattern "
+                              f"(e.g. {os.path.join(path, '%05d.png')})")
         if not os.path.isfile(path):
             raise SourceError(f"{path}: video file not found")
         self._cap = cv2.VideoCapture(path)

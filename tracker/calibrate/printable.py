@@ -49,7 +49,9 @@ def make_sheet(board: Pattern | CharucoSpec, dpi: int, paper: str) -> Sheet:
     need_w = cols * square_px / dots_per_mm + 2 * _MARGIN_MM
     need_h = rows * square_px / dots_per_mm + 2 * _MARGIN_MM + _TEXT_MM
     if need_w > paper_w or need_h > paper_h:
-        raise BadInput(f"--board {board}: needs {need_w:.0f} x {need_h:.0f} mm with margins and text, "
+        given = (f"--board {board}" if isinstance(board, CharucoSpec)
+                 else f"--pattern {board} --square {board.square_mm:g}")
+        raise BadInput(f"{given}: needs {need_w:.0f} x {need_h:.0f} mm with margins and text, "
                        f"{paper} is {paper_w:g} x {paper_h:g} mm: use smaller squares or a larger paper")
     sheet = np.full((round(paper_h * dots_per_mm), round(paper_w * dots_per_mm)), 255, dtype=np.uint8)
     top = round(_MARGIN_MM * dots_per_mm)

@@ -32,6 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if not args.tolerance >= 0:
         raise BadInput(f"--tolerance: expected a number >= 0, got {args.tolerance}")
+    if args.tolerance and not args.check:
+        raise BadInput("--tolerance goes with --check (it is how far a pose may differ from the live run's)")
     refuse_clashes({"--poses": args.poses}, {"REC.mcap": args.recording})
     report = replay(args.recording, args.poses, args.check, args.tolerance, None if args.quiet else sys.stderr)
     end = report.end
@@ -40,8 +42,9 @@ def run(args: argparse.Namespace) -> int:
     if not end.complete:
         print(f"tracker: {end.describe(args.recording)}; replayed the {report.frames} frames up to there",
               file=sys.stderr)
-    checked = f"; all {report.checked} poses identical to the live run" if args.check else ""
+    same = f"within {args.tolerance:g} of" if args.tolerance else "identical to"
+    checked = f"; all {report.checked} poses {same} the live run" if args.check else ""
     overruns = report.end_metadata.get("overruns")
-    live = f" (live run: {overruns} overruns)" if overruns else ""
+    live = f" (live run: {overruns} overruns)" if overruns not in (None, "", "0") else ""
     print(f"tracker: replayed {report.frames} frames in {report.seconds:.2f} s ({report.fps:.0f} fps){checked}{live}")
     return 0

@@ -25,7 +25,7 @@ from tracker.calibration import Calibration
 from tracker.config import TrackerConfig
 from tracker.errors import BadInput, RecordingError, SourceError
 from tracker.recording import schemas
-from tracker.recording.mcapio import ReadEnd, iter_records
+from tracker.recording.mcapio import MAGIC, ReadEnd, iter_records
 from tracker.recording.writer import ATTACH_CALIBRATION, ATTACH_CONFIG, META_END, META_RUN
 from tracker.sources import Frame, FrameSource
 
@@ -49,8 +49,15 @@ class RecordingInfo:
 
 def read_info(path: str) -> RecordingInfo:
     """The calibration, configuration and run metadata stored before the first frame."""
+    if os.path.isdir(path):
+        raise SourceError(f"{path}: is a folder; expected a recording (.mcap)")
     if not os.path.isfile(path):
         raise SourceError(f"{path}: recording not found")
+    with open(path, "rb") as f:
+        head = f.read(len(MAGIC))
+    if len(head) == len(MAGIC) and head != MAGIC:
+        # Another kind of file (an image, a video): not "cut short before its header".
+        raise SourceError(f"{path}: not an MCAP recording (it does not start with MCAP's magic bytes)")
     run: dict[str, str] = {}
     attachments: dict[str, bytes] = {}
     schema_names: dict[int, str] = {}
