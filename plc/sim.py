@@ -20,7 +20,7 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 from plc.encode import WordOrder, decode_block, decode_queue
 from plc.options import DEFAULT_SIM_HOST, DEFAULT_SIM_PORT
 from plc.registers import BLOCK_WORDS, QUEUE_WORDS, SERVER_REGISTERS
-from tracker.errors import TrackerError
+from tracker.errors import BadInput, TrackerError
 
 log = logging.getLogger(__name__)
 
@@ -31,7 +31,14 @@ HISTORY_LEN = 10_000
 
 
 class SimulatorError(TrackerError):
-    """The simulator cannot listen (address in use, no permission)."""
+    """The simulator did not start."""
+
+
+class CannotListen(SimulatorError, BadInput):
+    """The address given cannot be listened on (in use, or not this machine's): bad input, exit 2, as
+    the live view's --web address is."""
+
+    exit_code = 2
 
 
 @dataclass(frozen=True)
@@ -66,6 +73,7 @@ class PlcSimulator:
         self._stop_event: asyncio.Event | None = None
         self._ready = threading.Event()
         self._error: str | None = None
+        self._cannot_listen = False
         self._thread: threading.Thread | None = None
 
     # ---- life cycle ----
@@ -75,7 +83,7 @@ class PlcSimulator:
         if not self._ready.wait(START_TIMEOUT_S):
             raise SimulatorError(f"{self.label} on {self.host}:{self.port}: did not start in {START_TIMEOUT_S} s")
         if self._error:
-            raise SimulatorError(self._error)
+            raise (CannotListen if self._cannot_listen else SimulatorError)(self._error)
         return self
 
     def stop(self) -> None:
@@ -154,6 +162,7 @@ class PlcSimulator:
         try:
             await server.serve_forever(background=True)
         except RuntimeError:
+            self._cannot_listen = True
             self._error = (f"cannot listen on {self.host}:{self.port} (address in use, or not an address of "
                            f"this machine)")
             return

@@ -77,9 +77,9 @@ def test_plc_sim_bad_port_is_exit_2():
     assert proc.stderr.strip() == "tracker: error: --port: expected 0-65535, got 70000"
 
 
-def test_plc_sim_port_in_use_is_one_line(capsys):
+def test_plc_sim_port_in_use_is_one_line_and_exit_2(capsys):
     with PlcSimulator(port=0) as sim:
-        assert main(["plc-sim", "--port", str(sim.port)]) == 1
+        assert main(["plc-sim", "--port", str(sim.port)]) == 2  # the address given cannot be used: as --web
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "cannot listen on 127.0.0.1:" in lines[0]
 
