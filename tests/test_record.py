@@ -295,6 +295,18 @@ def test_unreadable_recording_is_bad_input(tmp_path, capsys):
     assert "empty.mcap: not a readable recording (it ends at byte 0" in capsys.readouterr().err
 
 
+def test_a_recording_cut_before_its_first_frame_is_nothing_to_run_on(recorded, tmp_path, capsys):
+    # "0 frames" and exit 0 hid it; the pose file beside it is left as it was.
+    rec, _ = recorded
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(rec.read_bytes()[: _chunk_starts(rec)[0] + 100])
+    poses = tmp_path / "poses.jsonl"
+    poses.write_text("kept\n")
+    assert main(["run", "--source", str(cut), "--no-plc", "--quiet", "--poses", str(poses)]) == 2
+    assert "ended before its first frame" in capsys.readouterr().err
+    assert poses.read_text() == "kept\n"
+
+
 def _chunk_starts(path) -> list[int]:
     """Byte offsets where the recording's chunks begin."""
     from tracker.recording.mcapio import ReadEnd, iter_records

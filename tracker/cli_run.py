@@ -212,6 +212,10 @@ def run(args: argparse.Namespace) -> int:
         _restore_signal_handlers(previous)
         if web is not None:
             web.close()
+    if not summary.frames and summary.stopped_by == "end of source":
+        # An empty video, a recording cut before its first chunk: "0 frames" and exit 0 hid it.
+        raise SourceError(f"--source {source.name}: it ended before its first frame; nothing was tracked "
+                          f"(outputs left as they were)")
     print(f"tracker: {summary.line()}")
     return 0
 
