@@ -84,6 +84,11 @@ class PlcWriter:
         self._frame: Pose | None = None  # the newest frame written: the queue lists its parts
         self._taken: set[int] = set()  # ids the PLC took that are still tracked: never listed again
         self._echo: int | None = None  # the last taken_id acted on; None until first read (a stale one is ignored)
+        # A taken_id left from an earlier run (track ids start at 1 again): while the PLC holds it, the part
+        # of this run with that id is not offered, as the PLC's commit to it could not be seen (the same
+        # value written again) and its echo would read as acted on: it would be picked twice.
+        self._stale: int | None = None
+        self._stale_said = False
         self._queue_seq = 0
         self._queue_key: tuple | None = None  # the last queue written, without its counters
         self._queue_due = 0.0  # monotonic time the queue must be rewritten even without changes
@@ -131,7 +136,7 @@ class PlcWriter:
             "link": self.link.name, "state": self.state, "latency_ms": round(s.last_latency_ms, 2),
             "seq": self._builder.state.seq, "queue_seq": self._queue_seq, "writes": s.writes,
             "taken": s.taken, "taken_echo": self._echo, "queue_ids": [] if frame is None else
-            [o.id for o in self._order.order(frame.objects, self._taken)][:5],
+            [o.id for o in self._order.order(frame.objects, self._held())][:5],
             "queue_rejected": self._queue_reject,
         }
 
@@ -223,8 +228,8 @@ class PlcWriter:
         if after is not None:  # a last pose and the empty frame after it: both, in order
             self._write(pose, running=True)
             pose = after
-        if self._write(pose, running=False):
-            log.debug("PLC %s: final status written (running bit cleared)", self.link.name)
+        if self._write(pose, running=False, offer=False):
+            log.debug("PLC %s: final status written (running bit cleared, the queue empty)", self.link.name)
         self.state = CLOSED
 
     def _connect(self) -> bool:
@@ -291,10 +296,12 @@ class PlcWriter:
         if self._echo is None:
             # Whatever the PLC holds before our first queue is from an earlier run: echo it, act on nothing.
             self._echo = taken_id
+            self._stale = taken_id or None
             return True
         if taken_id == self._echo:
             return False
         self._echo = taken_id
+        self._stale = None  # the PLC wrote since: a part with the old id may be offered
         tracked = {o.id for o in self._frame.objects} if self._frame is not None else set()
         if taken_id in tracked and taken_id not in self._taken:
             self._taken.add(taken_id)
@@ -306,15 +313,28 @@ class PlcWriter:
         return True
 
     # ---- writes ----
-    def _write(self, pose: Pose | None, running: bool, retake: bool = False) -> bool:
+    def _held(self) -> set[int]:
+        """Ids not offered to the PLC: those it took, and a stale taken_id's (see ``_stale``)."""
+        if self._stale is None:
+            return self._taken
+        if not self._stale_said and self._frame is not None and any(o.id == self._stale for o in self._frame.objects):
+            self._stale_said = True
+            log.warning("PLC %s: part %d is not offered while taken_id (290-291) still holds %d from before this "
+                        "run (a commit to it could not be told from the old value); it is offered once the PLC "
+                        "writes another taken_id: clear taken_id to 0 when the tracker restarts",
+                        self.link.name, self._stale, self._stale)
+        return self._taken | {self._stale}
+
+    def _write(self, pose: Pose | None, running: bool, retake: bool = False, offer: bool = True) -> bool:
         """The block (0-44), then the queue (100-219) when it changed or is due. ``retake``: the taken set
-        changed, so the block reports the new first entry of the current frame."""
+        changed, so the block reports the new first entry of the current frame. ``offer``: False at exit,
+        where the queue is written empty (a PLC committing to a part then would wait for an echo in vain)."""
         if pose is not None:
             self._frame = pose
             tracked = {o.id for o in pose.objects}
             self._taken &= tracked  # ids are never reused: a taken id that is no longer tracked is done with
-        entries = self._order.order(self._frame.objects, self._taken) if self._frame is not None else []
-        block_pose = pose if pose is not None else (self._frame if retake else None)
+        entries = self._order.order(self._frame.objects, self._held()) if self._frame is not None and offer else []
+        block_pose = pose if pose is not None else (self._frame if retake or not offer else None)
         first = entries[0] if entries else None
         prepared: Prepared = self._builder.prepare(block_pose, self.health, running, ms_u32(self._clock_ns()),
                                                    first)
@@ -362,7 +382,7 @@ class PlcWriter:
             self._poll_taken()  # the PLC's taken_id before our first queue: the baseline, never acted on
         frame = self._frame
         if entries is None:
-            entries = self._order.order(frame.objects, self._taken) if frame is not None else []
+            entries = self._order.order(frame.objects, self._held()) if frame is not None else []
         listed = [entry_fields(o) for o in entries[:QUEUE_ENTRIES]]
         t_capture_ms = frame.t_capture_ms if frame is not None else 0
         echo = self._echo or 0

@@ -28,7 +28,7 @@ from plc_support import (
 )
 
 from plc.block import ms_u32
-from plc.encode import WordOrder, decode_block, decode_queue, decode_u32
+from plc.encode import WordOrder, decode_block, decode_queue, decode_u32, encode_u32
 from plc.link import ModbusLink
 from plc.options import PlcOptions
 from plc.registers import QUEUE_START, QUEUE_WORDS, TAKEN
@@ -137,7 +137,9 @@ def test_queue_and_handshake_end_to_end(n_parts, mode, order, tmp_path):
         frames_by_ms.setdefault(arrival_ms(k), []).append(k)
     taken: set[int] = set()
     seqs = []
-    for w in queue_writes:
+    final = decode_queue(queue_writes[-1].values, wo)
+    assert final["queue_count"] == final["in_view"] == 0, "at exit the queue is written empty"
+    for w in queue_writes[:-1]:
         q = decode_queue(w.values, wo)
         seqs.append(q["queue_seq"])
         if q["taken_echo"] in seen.get("taken", []):
@@ -158,6 +160,7 @@ def test_queue_and_handshake_end_to_end(n_parts, mode, order, tmp_path):
             # Flags: bit 1 only (its height still settling: auto, the default); no part is unpickable.
             assert e["flags"] & ~2 == 0 and e["reserved"] == 0 and e["measured"] in (0, 1)
             assert e["age_frames"] == 0 or not e["measured"]
+    seqs.append(final["queue_seq"])
     assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), "queue_seq counts every queue write"
     assert set(seen["taken"]) == taken and len(taken) == (2 if n_parts > 2 else 1)
     # A taken part is never listed again, and the pose stream still reports it while in view.
@@ -331,3 +334,64 @@ def test_touching_parts_reach_the_plc_as_two_entries_flagged_not_pickable(tmp_pa
         d = min(math.dist((e["x_mm"], e["y_mm"]), (t["x_mm"], t["y_mm"])) for t in truth["objects"])
         assert d < 0.5, e
         assert e["flags"] & 1 == 1, e
+
+
+class _LastIds:
+    """A sink keeping the ids of the last frame handed to the sinks (what the pose stream reports)."""
+
+    def __init__(self) -> None:
+        self.ids: list[int] = []
+
+    def submit(self, frame, result) -> None:
+        self.ids = [o.id for o in result.objects]
+
+    def status(self) -> str:
+        return ""
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_taken_id_left_from_an_earlier_run_never_gets_a_part_picked_twice_and_exit_empties_the_queue():
+    # Track ids start at 1 again in every run. A PLC still holding taken_id 1 from the run before would
+    # write 1 again for this run's part 1: no change on the wire, and the echo, already 1, reads as
+    # acted on; the part stayed listed and the arm would pick it twice. So it is not offered until the
+    # PLC writes another taken_id.
+    wo = WordOrder.ABCD
+    health = Health()
+    sim = PlcSimulator(port=0, word_order=wo).start()
+    sim.store(TAKEN.address, encode_u32(1, wo))
+    opts = PlcOptions("127.0.0.1", sim.port, word_order=wo)
+    writer = PlcWriter(ModbusLink(opts), opts, health, owned=(sim,))
+    source = ScriptedCamera(Rendered(queue_scene(3)))
+    last = _LastIds()
+    seen = {}
+
+    def queue_of(k: int) -> dict:
+        wait_until(lambda: decode_queue(sim.read(QUEUE_START, QUEUE_WORDS), wo)["t_capture_ms"]
+                   == ms_u32(source.arrival_ns[k]), f"the queue of frame {k}")
+        return decode_queue(sim.read(QUEUE_START, QUEUE_WORDS), wo)
+
+    def take_another(k: int) -> None:
+        queue = queue_of(k - 1)
+        assert 1 in last.ids and queue["queue_count"] >= 1, "part 1 is tracked here, another listed"
+        listed = [int(e["id"]) for e in queue["entries"]]
+        assert 1 not in listed and queue["taken_echo"] == 1
+        sim.store(TAKEN.address, encode_u32(listed[0], wo))  # the PLC takes another part
+        wait_until(lambda: decode_queue(sim.read(QUEUE_START, QUEUE_WORDS), wo)["taken_echo"] == listed[0],
+                   "the echo")
+        seen["after"] = [int(e["id"]) for e in decode_queue(sim.read(QUEUE_START, QUEUE_WORDS), wo)["entries"]]
+        seen["ids"] = list(last.ids)
+
+    source.hooks = {30: lambda: take_another(30)}
+    run_loop(source, [last, writer], health)
+    queues = [decode_queue(w.values, wo) for w in sim.writes(QUEUE_START)]
+    before = [q for q in queues if q["taken_echo"] == 1 and q["queue_count"]]
+    assert before and all(1 not in [e["id"] for e in q["entries"]] for q in before)
+    # Once the PLC has written another taken_id, part 1 (still in view) is offered like any other.
+    assert 1 in seen["ids"] and 1 in seen["after"], seen
+    # At exit the queue is written empty (a PLC committing then would wait for an echo in vain) and the
+    # block says no part: count 0, running cleared.
+    assert queues[-1]["queue_count"] == 0 and queues[-1]["in_view"] == 0 and queues[-1]["entries"] == []
+    last_block = decode_block(sim.writes(0)[-1].values, wo)
+    assert last_block["count"] == 0 and last_block["status"] & 1 == 0

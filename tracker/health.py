@@ -23,7 +23,7 @@ FAULT_TEXT = {
     FAULT_FRAME_SIZE: "frame size differs from calibration",
     FAULT_RECORDING: "recording stopped",
     FAULT_OVERRUN: "overrun",
-    FAULT_SCENE: "scene not understood",
+    FAULT_SCENE: "scene not understood (foreground covers most of the region of interest)",
     FAULT_POSES: "pose output stopped",
 }
 
