@@ -163,8 +163,8 @@ class PlcSimulator:
             await server.serve_forever(background=True)
         except RuntimeError:
             self._cannot_listen = True
-            self._error = (f"cannot listen on {self.host}:{self.port} (address in use, or not an address of "
-                           f"this machine)")
+            self._error = (f"cannot listen on {self.host}:{self.port} (address in use, not an address of this "
+                           f"machine, or a port below 1024 without the right to it)")
             return
         # id 0 = every unit id; "x" = the one shared block of registers.
         self._registers = server.context.devices[0].block["x"][2]

@@ -278,8 +278,11 @@ class PlcWriter:
     # ---- the handshake (290-291) ----
     def _poll_taken(self) -> bool:
         """Read taken_id; True when the queue changes because of it (a part taken, or an id to echo)."""
-        # Only once the block is acknowledged: a PLC refusing everything (wrong base) gets one error line.
-        if self._taken_reject or self._queue_reject or not self.link.connected or self.state != CONNECTED:
+        # Only once the block is acknowledged (a PLC refusing everything, a wrong base, gets one error line),
+        # but for the baseline, read before anything is offered (see _stale).
+        if self._taken_reject or self._queue_reject or not self.link.connected:
+            return False
+        if self.state != CONNECTED and self._echo is not None:
             return False
         try:
             words = self.link.read(self.options.base + TAKEN.address, TAKEN.words)
@@ -329,6 +332,13 @@ class PlcWriter:
         """The block (0-44), then the queue (100-219) when it changed or is due. ``retake``: the taken set
         changed, so the block reports the new first entry of the current frame. ``offer``: False at exit,
         where the queue is written empty (a PLC committing to a part then would wait for an echo in vain)."""
+        if self._echo is None and self.link.connected:
+            # The PLC's taken_id before the first part is offered: a stale one holds its id's part back.
+            self._poll_taken()
+            if not self.link.connected:
+                if pose is not None:
+                    self._put_back(pose)
+                return False
         if pose is not None:
             self._frame = pose
             tracked = {o.id for o in pose.objects}

@@ -157,6 +157,34 @@ def test_outputs_have_a_new_files_permissions_and_a_replaced_file_keeps_its_own(
         os.umask(old_mask)
 
 
+def test_a_read_only_output_is_replaced_and_stays_read_only(scene_dir, tmp_path):
+    # Replacing a file needs the folder writable, not the file: the temporary file takes the old one's
+    # mode only once written (given it at once, a 0444 one could not be written: "Permission denied").
+    import shutil as _shutil
+    import subprocess
+    import sys
+
+    prefix = []
+    if os.geteuid() == 0:  # root writes read-only files all the same: drop that power for the run
+        if _shutil.which("setpriv") is None:
+            pytest.skip("running as root without setpriv: a read-only file cannot be tried")
+        prefix = ["setpriv", "--inh-caps=-all", "--bounding-set=-dac_override,-dac_read_search"]
+    poses, record, calib = tmp_path / "p.jsonl", tmp_path / "r.mcap", tmp_path / "c.yaml"
+    for path in (poses, record, calib):
+        path.write_text("old")
+        path.chmod(0o444)
+    run = [*prefix, sys.executable, "-m", "tracker"]
+    proc = subprocess.run([*run, *_args(scene_dir, "--poses", str(poses), "--record", str(record),
+                                         "--max-frames", "2")], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    proc = subprocess.run([*run, "calibrate", "scale", "--size", "640x480", "--mm-per-px", "0.5", "--out", str(calib)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    for path in (poses, record, calib):
+        assert stat.S_IMODE(path.stat().st_mode) == 0o444 and path.read_bytes() != b"old", path
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml", "p.jsonl", "r.mcap"]
+
+
 def test_staged_file_is_removed_when_nothing_was_processed(tmp_path):
     target = tmp_path / "p.jsonl"
     target.write_text("old\n")

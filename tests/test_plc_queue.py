@@ -9,6 +9,7 @@ import math
 import re
 import subprocess
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -38,7 +39,8 @@ from plc.writer import PlcWriter
 from tracker.cli_synth import write_scene
 from tracker.health import Health
 from tracker.pose_sink import PoseSink
-from tracker.poses import read_poses
+from tracker.poses import FrameResult, TrackedObject, read_poses
+from tracker.sources import Frame
 
 BELT = (250.0, 120.0)  # queue_scene's belt velocity: the true direction of motion
 NOT_LISTED = 9999  # a taken_id that is no part's
@@ -395,3 +397,24 @@ def test_a_taken_id_left_from_an_earlier_run_never_gets_a_part_picked_twice_and_
     assert queues[-1]["queue_count"] == 0 and queues[-1]["in_view"] == 0 and queues[-1]["entries"] == []
     last_block = decode_block(sim.writes(0)[-1].values, wo)
     assert last_block["count"] == 0 and last_block["status"] & 1 == 0
+
+
+def test_a_stale_taken_id_is_read_before_the_first_queue_offers_anything():
+    # Part 1 in view when the writer first reaches the PLC: the stale id must be known before that first
+    # queue is built, or the queue lists part 1 with its echo already 1 (found by a review: it did).
+    wo = WordOrder.ABCD
+    sim = PlcSimulator(port=0, word_order=wo).start()
+    sim.store(TAKEN.address, encode_u32(1, wo))
+    opts = PlcOptions("127.0.0.1", sim.port, word_order=wo)
+    writer = PlcWriter(ModbusLink(opts), opts, Health(), owned=(sim,))
+    corners = np.array([[-40.0, -25.0], [40.0, -25.0], [40.0, 25.0], [-40.0, 25.0]])
+    part = TrackedObject(1, 0.0, 0.0, 0.0, 80.0, 50.0, corners, 300.0, 0.0, True)
+    writer.submit(Frame(0, 0, np.zeros((4, 4), np.uint8), time.monotonic_ns()), FrameResult(0, 0, (part,)))
+    try:
+        wait_until(lambda: sim.writes(QUEUE_START), "the first queue")
+        first = decode_queue(sim.writes(QUEUE_START)[0].values, wo)
+        block = decode_block(sim.writes(0)[0].values, wo)
+    finally:
+        writer.close()
+    assert first["taken_echo"] == 1 and first["queue_count"] == 0, first
+    assert block["count"] == 0 and block["id"] == 0 and block["seq"] == 0, "part 1 is not reported as next"

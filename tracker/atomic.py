@@ -20,10 +20,12 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=target.suffix, dir=target.parent)
     os.close(fd)
     try:
-        os.chmod(tmp, replacing_mode(target))
         yield Path(tmp)
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
+        # Only now: while written it stays mkstemp's 0600 (its writer must be able to open it, whatever
+        # the mode of the file it replaces, a read-only one included).
+        os.chmod(tmp, replacing_mode(target))
         os.replace(tmp, target)
     finally:
         if os.path.exists(tmp):

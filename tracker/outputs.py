@@ -100,11 +100,11 @@ class StagedFile:
         except OSError as exc:
             raise BadInput(f"{option} {target}: cannot write {what}: {exc.strerror}") from None
         os.close(fd)
-        os.chmod(self.path, replacing_mode(target))
         self.published = False
 
     def publish(self) -> None:
         if not self.published:
+            os.chmod(self.path, replacing_mode(self.target))  # its writer has it open already
             os.replace(self.path, self.target)
             self.published = True
 

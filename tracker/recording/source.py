@@ -53,6 +53,8 @@ def read_info(path: str) -> RecordingInfo:
         raise SourceError(f"{path}: is a folder; expected a recording (.mcap)")
     if not os.path.isfile(path):
         raise SourceError(f"{path}: recording not found")
+    if not os.access(path, os.R_OK):
+        raise SourceError(f"{path}: cannot read the recording: permission denied")
     with open(path, "rb") as f:
         head = f.read(len(MAGIC))
     if len(head) == len(MAGIC) and head != MAGIC:

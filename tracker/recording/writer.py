@@ -176,7 +176,6 @@ class Recorder:
         try:
             fd, temporary = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent or ".")
             os.close(fd)
-            os.chmod(temporary, replacing_mode(target))  # mkstemp makes it private
             out = RawFile(temporary)
         except OSError as exc:
             raise BadInput(f"--record {path}: cannot write the recording: {exc.strerror}") from None
@@ -314,6 +313,7 @@ class Recorder:
                 self._spares.put(chunk.buffer)
                 self.frames_written += frames
                 if self._temporary:
+                    os.chmod(self._temporary, replacing_mode(self.path))  # mkstemp made it private
                     os.replace(self._temporary, self.path)
                     self._temporary = None
             except OSError as exc:
