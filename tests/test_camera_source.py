@@ -19,10 +19,15 @@ from tracker.sources import CameraSource
 class FakeCapture:
     """Delivers numbered frames (the number is in pixel [0, 0]) as fast as asked, or dies."""
 
-    def __init__(self, index, frames=10_000, opened=True, period_s=0.0005):
+    def __init__(self, index, frames=10_000, opened=True, period_s=0.0005, stamp=None):
         self.frames, self.opened, self.period_s = frames, opened, period_s
         self.delivered = 0
         self.lock = threading.Lock()
+        # What get(CAP_PROP_POS_MSEC) says of the frame last read (arrival in monotonic ns -> ms); None:
+        # 0, as OpenCV's backends that know nothing of it.
+        self.stamp = stamp
+        self.arrivals: list[int] = []
+        self.stamped: list[float] = []
 
     def isOpened(self):  # noqa: N802 - OpenCV's name
         return self.opened
@@ -39,7 +44,15 @@ class FakeCapture:
             image[0, 0] = self.delivered % 256
             image[0, 1] = self.delivered // 256
             self.delivered += 1
+            now = time.monotonic_ns()
+            self.arrivals.append(now)
+            self.stamped.append(0.0 if self.stamp is None else self.stamp(now))
         return True, image
+
+    def get(self, prop):
+        assert prop == sources.cv2.CAP_PROP_POS_MSEC
+        with self.lock:
+            return self.stamped[-1] if self.stamped else 0.0
 
     def release(self):
         pass
@@ -186,3 +199,36 @@ def test_the_overrun_fault_clears_once_the_loop_keeps_up_again(monkeypatch):
     # Cleared once no frame has been dropped for the hold (a busy machine may drop one more later:
     # it is set again, and clears again).
     assert FAULT_NONE in faults[set_at:], faults
+
+
+@pytest.mark.parametrize(("stamp", "lag_ms"), [
+    (lambda now: now / 1e6 - 40.0, 40.0),  # V4L2: the driver's monotonic stamp, 40 ms before arrival
+    (None, 0.0),  # a backend that stamps nothing
+    (lambda now: 1234.5, 0.0),  # a stream position, not a time on our clock
+    (lambda now: now / 1e6 + 100.0, 0.0),  # in the future: not believed
+    (lambda now: now / 1e6 - 5000.0, 0.0),  # too long ago to be this frame's
+])
+def test_a_cameras_frame_carries_its_capture_time_where_the_driver_stamps_it(monkeypatch, stamp, lag_ms):
+    # A USB camera's frame arrives tens of ms after it was exposed: 12 mm of travel at 300 mm/s in the
+    # PLC's extrapolation of "where the part is now" when t_capture_ms is its arrival.
+    made = _fake(monkeypatch, frames=20, period_s=0.002, stamp=stamp)
+    cam = CameraSource(0)
+    frames = []
+    try:
+        for frame in cam:
+            frames.append(frame)
+            if len(frames) == 5:
+                break
+    finally:
+        cam.close()
+    arrivals = np.array(made["cap"].arrivals)
+    for frame in frames:
+        assert frame.arrival_ns == frame.t_ns
+        # Its capture time is that of a frame read: the stamp's (to the microsecond), or (no stamp to
+        # believe) its arrival, read just after the capture returned it.
+        after = (frame.t_ns + lag_ms * 1e6) - arrivals
+        if lag_ms:
+            assert np.min(np.abs(after)) < 0.01e6
+        else:
+            assert np.any((after >= 0) & (after < 20e6)), after / 1e6
+    assert [f.t_ns for f in frames] == sorted({f.t_ns for f in frames})

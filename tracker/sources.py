@@ -3,7 +3,8 @@
 Every source yields ``Frame``s of 8-bit grey images with a capture time in
 integer nanoseconds (``t_ns``: the source's own clock, which is what the
 pipeline sees) and the tracker's monotonic time when the frame arrived
-(``arrival_ns``: for latency and the PLC's t_capture_ms).
+(``arrival_ns``: for latency and the PLC's t_capture_ms; a live camera's, when it captured the
+frame, where its driver stamps frames on that clock).
 """
 
 from __future__ import annotations
@@ -32,6 +33,9 @@ _RAW_GREY_FOURCC = (b"\0\0\0\0", b"Y800", b"GREY", b"Y8  ")
 PREFETCH_FRAMES = 4
 # A live camera that delivers nothing for this long is lost.
 CAMERA_TIMEOUT_S = 2.0
+# A camera's own timestamp of a frame is its capture time only this little before it arrived (a stamp
+# on another clock, or a stream position, lies far off, or in the future).
+CAMERA_MAX_LATENCY_NS = 500_000_000
 
 
 @dataclass(frozen=True)
@@ -183,9 +187,12 @@ class CameraSource(FrameSource):
         self._thread.start()
 
     def _grab(self) -> None:
+        last_ns = 0
         while self._running:
             ok, image = self._cap.read()
             now = time.monotonic_ns()
+            # Capture times only go forward (the Kalman filter's steps), whichever clock gave them.
+            captured = last_ns = max(self._captured_ns(now), last_ns + 1) if ok else now
             with self._cond:
                 if not ok:
                     self._failed = True
@@ -193,8 +200,16 @@ class CameraSource(FrameSource):
                     return
                 if self._latest is not None:
                     self.overruns += 1
-                self._latest = (now, image)
+                self._latest = (captured, image)
                 self._cond.notify_all()
+
+    def _captured_ns(self, arrival_ns: int) -> int:
+        """When the frame was captured: the driver's timestamp where it is on our monotonic clock (V4L2's,
+        which OpenCV gives as the position in ms: a USB camera's frame arrives tens of ms after it was
+        exposed, millimetres of belt travel in the PLC's "where the part is now"); otherwise, as other
+        backends give a stream position or another clock, its arrival."""
+        stamp_ns = round(self._cap.get(cv2.CAP_PROP_POS_MSEC) * 1e6)
+        return stamp_ns if 0 <= arrival_ns - stamp_ns <= CAMERA_MAX_LATENCY_NS else arrival_ns
 
     def __iter__(self) -> Iterator[Frame]:
         index = 0
@@ -206,9 +221,9 @@ class CameraSource(FrameSource):
                         return
                     why = "stopped delivering frames" if self._failed or ready else f"no frame for {CAMERA_TIMEOUT_S} s"
                     raise SourceLost(f"{self.name}: {why}")
-                now, image = self._latest
+                captured, image = self._latest
                 self._latest = None
-            yield Frame(index, now, to_gray(image, self.name), now)
+            yield Frame(index, captured, to_gray(image, self.name), captured)
             index += 1
 
     def close(self) -> None:
