@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import time
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -110,8 +111,13 @@ class Run:
         return float(np.percentile(self.loop_ns, q) / 1e6)
 
 
-def run_video(video: RealVideo, data_dir: Path, config: TrackerConfig | None = None) -> Run:
+def run_video(video: RealVideo, data_dir: Path, config: TrackerConfig | None = None,
+              change: Callable[[np.ndarray], np.ndarray] | None = None) -> Run:
+    """The video through the pipeline; ``change``: what is done to each frame first (another cell's
+    camera: blur, exposure)."""
     frames, fps = decode(data_dir / video.file)
+    if change is not None:
+        frames = [change(frame) for frame in frames]
     h, w = frames[0].shape
     pipeline = Pipeline(nadir_calibration(w, h, video.mm_per_px), config or video.config())
     results, loop_ns = [], []

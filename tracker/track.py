@@ -341,12 +341,16 @@ class Tracker:
         for track in self.tracks:
             track.predict(t_ns, cfg)
         merged = self._merged(measurements)
+        owners = self._owners(merged, measurements, t_ns)
+        # A blob one of its tracks owns: the others in it are that part's duplicates, ended here.
+        duplicates = {ti for ti, mi in merged.items() if mi in owners and owners[mi] != ti}
+        merged = {ti: mi for ti, mi in merged.items() if mi not in owners}
         pairs = []
         for ti, track in enumerate(self.tracks):
-            if ti in merged:
+            if ti in merged or ti in duplicates or ti in owners.values():
                 continue
             for mi, m in enumerate(measurements):
-                if mi in merged.values():
+                if mi in merged.values() or mi in owners:
                     continue
                 d = math.dist(track.position, (m.rect.x_mm, m.rect.y_mm))
                 # A clipped blob's centre is off the part's: allow for half the part.
@@ -357,8 +361,8 @@ class Tracker:
                 if d <= gate:
                     pairs.append((d, ti, mi))
         pairs.sort()
-        track_to_m: dict[int, int] = {}
-        used: set[int] = set()
+        track_to_m = {ti: mi for mi, ti in owners.items()}
+        used = set(owners)
         for _, ti, mi in pairs:
             if ti not in track_to_m and mi not in used:
                 track_to_m[ti] = mi
@@ -366,6 +370,8 @@ class Tracker:
         used.update(merged.values())
         out, alive = [], []
         for ti, track in enumerate(self.tracks):
+            if ti in duplicates:
+                continue
             m = measurements[track_to_m[ti]] if ti in track_to_m else None
             if ti in merged:
                 # One blob holds this part and another: neither can be measured, nor picked.
@@ -439,6 +445,25 @@ class Tracker:
                       and cv2.pointPolygonTest(outline, tuple(map(float, t.position)), False) >= 0]
             if len(inside) > 1:
                 out.update(dict.fromkeys(inside, mi))
+        return out
+
+    def _owners(self, merged: dict[int, int], measurements: list[Measurement], t_ns: int) -> dict[int, int]:
+        """Blobs holding several settled tracks (see _merged) that one of them has matched at its own size,
+        where it is predicted, for longer than max_coast_s: blob -> that track. The others are its
+        duplicates: a part whose blob split for a moment (a belt's stop and start, motion blur), a piece
+        starting a track of its own, and joined again. Two parts that touch make a blob larger than either,
+        and stay merged (a real foil pouch, blurred: both tracks coasted inside its blob for 80 frames,
+        neither measured)."""
+        cfg = self.config
+        out: dict[int, int] = {}
+        for mi in set(merged.values()):
+            m = measurements[mi]
+            own = [ti for ti, blob in merged.items() if blob == mi
+                   and self.tracks[ti].odd_size_since_ns is not None
+                   and t_ns - self.tracks[ti].odd_size_since_ns > cfg.max_coast_s * 1e9
+                   and not self.tracks[ti].size_jump(m, cfg) and not self.tracks[ti].aside(m, cfg)]
+            if own:
+                out[mi] = max(own, key=lambda ti: (self.tracks[ti].hits, -self.tracks[ti].id))
         return out
 
     def _inside_known(self, m: Measurement, tracks: list[Track], measurements: list[Measurement]) -> bool:
