@@ -64,23 +64,25 @@ def refuse_clashes(outputs: dict[str, str | None], inputs: dict[str, str | None]
 
 
 def check_target(option: str, target: str, what: str) -> str:
-    """The folder ``target`` goes in; BadInput (exit 2) when it cannot be a file there."""
-    folder = os.path.dirname(os.path.abspath(target))
+    """The folder ``target`` goes in; BadInput (exit 2) when it cannot be a file there (``option``: the
+    option that named it, "" for none)."""
+    where = f"{option} {target}" if option else target
     if os.path.isdir(target):
-        raise BadInput(f"{option} {target}: cannot write {what}: it is a folder; expected a file name")
-    if not os.path.isdir(folder):
-        raise BadInput(f"{option} {target}: cannot write {what}: the folder {folder} does not exist")
-    return folder
+        raise BadInput(f"{where}: cannot write {what}: it is a folder; expected a file name")
+    check_writable(Path(target), what, where)
+    return os.path.dirname(os.path.abspath(target))
 
 
-def check_writable(path: Path, what: str) -> None:
-    """BadInput (exit 2) unless ``what`` can be written at ``path``: its folder exists and may be
-    written in (checked before any work, so that none is lost to an output that cannot be kept)."""
+def check_writable(path: Path, what: str, where: str | None = None) -> None:
+    """BadInput (exit 2) unless ``what`` can be written at ``path`` (``where``: how the message names
+    it): its folder exists and may be written in (checked before any work, so that none is lost to an
+    output that cannot be kept)."""
     parent = path.parent if str(path.parent) else Path(".")
+    where = where or str(path)
     if not parent.is_dir():
-        raise BadInput(f"{path}: cannot write {what}: the folder {parent} does not exist")
+        raise BadInput(f"{where}: cannot write {what}: the folder {parent} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise BadInput(f"{path}: cannot write {what}: the folder {parent} is not writable")
+        raise BadInput(f"{where}: cannot write {what}: the folder {parent} is not writable")
 
 
 class StagedFile:

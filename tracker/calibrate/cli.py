@@ -18,7 +18,7 @@ from tracker.calibrate.images import read_all_same_size, read_grey
 from tracker.calibrate.intrinsics import calibrate_intrinsics
 from tracker.calibrate.settings import DEFAULTS
 from tracker.errors import BadInput, TrackerError
-from tracker.outputs import check_writable
+from tracker.outputs import check_target, check_writable
 
 CAPTURE = CaptureSettings()
 
@@ -129,22 +129,15 @@ def _check_out(path: str) -> Path:
     out = Path(path)
     if out.suffix.lower() not in calibfile.SUFFIXES:
         raise BadInput(f"{out}: unsupported extension {out.suffix!r}, expected one of {', '.join(calibfile.SUFFIXES)}")
-    _check_file(out, "the calibration")
+    check_target("", str(out), "the calibration")
     return out
-
-
-def _check_file(path: Path, what: str) -> None:
-    """Before any work: ``path`` can take ``what`` (a file name in a folder that exists and may be written)."""
-    if path.is_dir():
-        raise BadInput(f"{path}: cannot write {what}: it is a folder; expected a file name")
-    check_writable(path, what)
 
 
 def _check_preview_file(path: Path) -> None:
     """Before any work (the calibration is written after it): a PNG file OpenCV can write there."""
     if path.suffix.lower() != ".png":
         raise BadInput(f"--preview {path}: expected a .png file name, got {path.suffix or 'no extension'!r}")
-    _check_file(path, "the preview")
+    check_target("--preview", str(path), "the preview")
 
 
 def _check_preview_folder(path: Path) -> None:
@@ -190,7 +183,7 @@ def check_intrinsics_args(args: argparse.Namespace) -> tuple[Path, Path | None]:
         raise BadInput(f"--min-views: expected at least 3, got {args.min_views}")
     report_path = Path(args.report) if args.report else None
     if report_path:
-        _check_file(report_path, "the report")
+        check_target("--report", str(report_path), "the report")
     if getattr(args, "preview", None):
         _check_preview_folder(Path(args.preview))
     return out, report_path
@@ -314,7 +307,7 @@ def run_board(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".png":
         raise BadInput(f"{out}: expected a .png file")
-    _check_file(out, "the board")
+    check_target("--out", str(out), "the board")
     sheet = make_sheet(board, args.dpi, args.paper)
     report.write_atomic(out, png_bytes(sheet))
     print(f"wrote {out}: {args.paper} at {args.dpi} dpi; one square prints {sheet.square_mm:.3f} mm "
