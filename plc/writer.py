@@ -224,11 +224,13 @@ class PlcWriter:
         if not self.link.connected and not self._connect():
             log.warning("PLC %s: not reachable at exit; the PLC will see the heartbeat stop", self.link.name)
             return
-        pose, after = self._take(), self._take()
-        if after is not None:  # a last pose and the empty frame after it: both, in order
-            self._write(pose, running=True)
-            pose = after
-        if self._write(pose, running=False, offer=False):
+        # The poses not yet written (a last pose and the empty frame after it: both, in order), as any
+        # other; then the final status over the last of them, offering nothing (a last pose written only
+        # there never reached the block: its fields stayed those of the pose before, found by CI).
+        for pose in (self._take(), self._take()):
+            if pose is not None:
+                self._write(pose, running=True)
+        if self._write(None, running=False, offer=False):
             log.debug("PLC %s: final status written (running bit cleared, the queue empty)", self.link.name)
         self.state = CLOSED
 

@@ -418,3 +418,21 @@ def test_a_stale_taken_id_is_read_before_the_first_queue_offers_anything():
         writer.close()
     assert first["taken_echo"] == 1 and first["queue_count"] == 0, first
     assert block["count"] == 0 and block["id"] == 0 and block["seq"] == 0, "part 1 is not reported as next"
+
+
+def test_a_pose_still_pending_at_exit_reaches_the_block_before_the_final_status():
+    # A pose submitted just before the writer closes is written as any other, then the final status
+    # (queue empty, count 0, running cleared) keeps its fields: written only in that final status, its
+    # fields never reached the block (the e2e test read the pose of two frames before, found by CI).
+    wo = WordOrder.ABCD
+    sim = PlcSimulator(port=0, word_order=wo).start()
+    opts = PlcOptions("127.0.0.1", sim.port, word_order=wo)
+    writer = PlcWriter(ModbusLink(opts), opts, Health(), owned=(sim,))
+    corners = np.array([[-40.0, -25.0], [40.0, -25.0], [40.0, 25.0], [-40.0, 25.0]])
+    for k in range(3):
+        part = TrackedObject(1, 10.0 * k, 0.0, 0.0, 80.0, 50.0, corners, 300.0, 0.0, True)
+        writer.submit(Frame(k, k, np.zeros((4, 4), np.uint8), time.monotonic_ns()), FrameResult(k, k, (part,)))
+    writer.close()  # at once: the last pose is most likely still pending
+    blocks = [decode_block(w.values, wo) for w in sim.writes(0)]
+    assert blocks[-1]["x_mm"] == 20.0 and blocks[-1]["count"] == 0 and blocks[-1]["status"] & 1 == 0
+    assert any(b["x_mm"] == 20.0 and b["count"] == 1 and b["status"] & 1 for b in blocks[:-1])
