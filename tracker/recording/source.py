@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.exceptions import EndOfFile, McapError
 from mcap.records import Attachment, Channel, Chunk, Message, Metadata, Schema
 
 from tracker import calibration as calib_io
@@ -66,20 +66,17 @@ def read_info(path: str) -> RecordingInfo:
     topics: dict[int, str] = {}
     end = ReadEnd()
     with open(path, "rb") as f:
-        try:
-            for record in iter_records(f, end, emit_chunks=True):
-                if isinstance(record, Schema):
-                    schema_names[record.id] = record.name
-                elif isinstance(record, Channel):
-                    topics[record.id] = record.topic
-                elif isinstance(record, Metadata) and record.name == META_RUN:
-                    run = dict(record.metadata)
-                elif isinstance(record, Attachment):
-                    attachments[record.name] = record.data
-                elif isinstance(record, Chunk | Message):
-                    break  # the run information is all before the first frame
-        except InvalidMagic:
-            raise SourceError(f"{path}: not an MCAP file") from None
+        for record in iter_records(f, end, emit_chunks=True):
+            if isinstance(record, Schema):
+                schema_names[record.id] = record.name
+            elif isinstance(record, Channel):
+                topics[record.id] = record.topic
+            elif isinstance(record, Metadata) and record.name == META_RUN:
+                run = dict(record.metadata)
+            elif isinstance(record, Attachment):
+                attachments[record.name] = record.data
+            elif isinstance(record, Chunk | Message):
+                break  # the run information is all before the first frame
     if end.position == 0 or (end.truncated and not run):
         raise SourceError(f"{path}: not a readable recording (it ends at byte {end.position}, before its header)")
     if ATTACH_CALIBRATION not in attachments:
