@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import logging
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,18 @@ SHARED_DATA = ROOT.parent / "shared" / "data"
 # along an edge at some angles (the pattern repeats in every pixel), which a thin box's height and
 # first sizes read as tenths of a mm; at 8 it is within 0.01 px (tests/test_synthetic.py).
 BOX_SUPERSAMPLE = 8
+
+
+@pytest.fixture(autouse=True)
+def _logging_left_to_pytest():
+    """The CLI (called in-process) points the root logger at the sys.stderr of its test, which pytest
+    closes: a later test's log line would fail on it ("--- Logging error ---", I/O operation on closed
+    file). Its handler goes with its test (pytest's own are subclasses, and stay)."""
+    yield
+    root = logging.getLogger()
+    for handler in root.handlers[:]:
+        if type(handler) is logging.StreamHandler:
+            root.removeHandler(handler)
 
 
 @functools.cache

@@ -85,6 +85,18 @@ def test_outside_the_region_of_interest_nothing_is_a_part(runs):
         assert ys and top <= min(ys) and max(ys) <= bottom
 
 
+def test_the_default_settings_turn_to_the_textured_model_on_the_real_belt(videos_dir):
+    """No settings at all (no region, no belt model, no part sizes): the diamond-textured belt's look moves
+    with it, the default belt model ("auto") turns textured within its first frames, and every part is
+    one track with nothing invented (the plain model alone: 38 tracks at 3 frames per second)."""
+    from tracker.config import TrackerConfig
+
+    s = score(run_video(WHITE, videos_dir, TrackerConfig()).results, load_truth(videos_dir, WHITE), WHITE.last_frame)
+    assert s.found_one_track == s.parts == 5, (s.line(), s.tracks_per_part)
+    assert s.phantoms == 0, (s.line(), s.phantom_ids)
+    assert s.count_accuracy >= 0.9, (s.line(), s.count_misses)
+
+
 def test_tracker_run_on_a_real_video_with_a_settings_file(videos_dir, tmp_path):
     """The real CLI, as a user would run it: textured belt, the belt area, an approximate calibration."""
     import json

@@ -25,7 +25,7 @@ from tracker.undistort import BeltMapper
 
 
 @pytest.mark.parametrize(("segment", "message"), [
-    ({"model": "belt-map"}, "segment.model: expected one of ['reference', 'textured']"),
+    ({"model": "belt-map"}, "segment.model: expected one of ['auto', 'reference', 'textured']"),
     ({"roi_px": [[0, 0], [10, 0]]}, "segment.roi_px: expected a polygon of >= 3"),
     ({"roi_mm": [[0, 0], [10, "a"], [3, 4]]}, "segment.roi_mm: expected a polygon of >= 3"),
     ({"roi_px": [[0, 0], [9, 0], [9, 9]], "roi_mm": [[0, 0], [9, 0], [9, 9]]}, "expected roi_px or roi_mm, not both"),

@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 from textured_support import flat_textured_results, textured_run
 
+from tracker.config import SegmentConfig, TrackerConfig
 from tracker.evaluate import evaluate
 from tracker.pipeline import Pipeline
 from tracker.synthetic import CameraSpec
@@ -38,9 +39,10 @@ def test_part_on_a_textured_moving_belt_with_stops_drift_and_compression(contras
 
 
 def test_the_reference_model_fails_on_the_same_belt():
-    """Without the textured model the moving texture is foreground: phantoms (the test above can fail)."""
+    """Without the textured model the moving texture is foreground: phantoms (the test above can fail; the
+    default, "auto", turns to the textured model here: tests/test_belt_look.py)."""
     frames, truths, t_ns = (run[:REFERENCE_FRAMES] for run in textured_run(30.0))
-    pipeline = Pipeline(CameraSpec().calibration())
+    pipeline = Pipeline(CameraSpec().calibration(), TrackerConfig(segment=SegmentConfig(model="reference")))
     poses = [pipeline.process(i, f, t).to_dict() for i, (f, t) in enumerate(zip(frames, t_ns, strict=True))]
     acc = evaluate(poses, truths, skip_first=SKIP_FIRST)
     assert acc.false_objects > 0 or acc.summary()["centroid_mean_mm"] > 0.1

@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass, field, fields
 
 from tracker.errors import BadInput
 
-SEGMENT_MODELS = ("reference", "textured")
+SEGMENT_MODELS = ("auto", "reference", "textured")
 
 
 @dataclass(frozen=True)
@@ -40,9 +40,19 @@ class SegmentConfig:
     # Side of the square opening kernel that removes noise speckles from the mask.
     open_kernel_px: int = 3
     # Belt model: "reference" (a per-pixel image of the empty belt: exact on plain belts whose
-    # look does not move) or "textured" (real belts whose texture, streaks and seams move with
-    # the parts: texture-suppressed levels against per-pixel statistics of the passing belt).
-    model: str = "reference"
+    # look does not move), "textured" (real belts whose texture, streaks and seams move with
+    # the parts: texture-suppressed levels against per-pixel statistics of the passing belt), or
+    # "auto": "reference" until the belt's own look is seen to move with it, then "textured" for
+    # good (segment/look.py): the region of interest cut into auto_tiles tiles along its longer
+    # side, a tile changing where more than auto_tile_changed of its pixels differ from the last
+    # frame by more than motion_threshold (3 x 3 means), the look moving once the median share of
+    # tiles changing over auto_frames new frames reaches auto_moving_share (real belts 0.3-0.9,
+    # rendered plain belts with up to five parts at most 0.15).
+    model: str = "auto"
+    auto_tiles: int = 16
+    auto_tile_changed: float = 0.01
+    auto_frames: int = 9
+    auto_moving_share: float = 0.3
     # Region of interest, set once: the belt area as an image polygon [[x, y], ...] (pixels) or a
     # belt polygon (mm, world frame); outside it nothing is a part. Empty: the whole image.
     roi_px: tuple = ()
@@ -75,7 +85,10 @@ class SegmentConfig:
     def __post_init__(self) -> None:
         _positive(self, "diff_threshold", "motion_threshold", "background_every", "startup_frames",
                   "absorb_after_frames", "open_kernel_px", "max_blobs", "textured_work_px",
-                  "textured_threshold", "textured_sigmas", "min_part_contrast")
+                  "textured_threshold", "textured_sigmas", "min_part_contrast", "auto_tiles", "auto_frames")
+        for name in ("auto_tile_changed", "auto_moving_share"):
+            if not 0 < getattr(self, name) < 1:
+                raise BadInput(f"segment.{name}: expected a share 0 < s < 1, got {getattr(self, name)}")
         if self.model not in SEGMENT_MODELS:
             raise BadInput(f"segment.model: expected one of {list(SEGMENT_MODELS)}, got {self.model!r}")
         if self.faint_threshold < 0:

@@ -22,6 +22,7 @@ from tracker.measure import Measurer
 from tracker.poses import FrameResult
 from tracker.segment import make_segmenter
 from tracker.segment.guard import ClutterGuard
+from tracker.segment.look import MovingLook
 from tracker.segment.motion import BeltMotion
 from tracker.segment.roi import roi_mask, roi_polygon_px
 from tracker.track import Tracker
@@ -57,32 +58,15 @@ class Pipeline:
         seg = self.config.segment
         # The region of interest as an image polygon (pixels; None: the whole frame), for previews.
         self.roi_px = roi_polygon_px(seg, calibration)
-        roi = roi_mask(self.roi_px, calibration.size)
-        self.roi_mask = None if self.roi_px is None else roi
-        self.segmenter = make_segmenter(seg, roi, calibration.mm_per_px_at_centre())
-        self.mapper = mapper = BeltMapper(calibration, self.config.measure.part_height_mm)
-        measure = self.config.measure
-        if seg.model == "reference" and 0 < seg.faint_threshold < measure.min_contrast:
-            # The faint faces the plain belt model joins to a part are read too (on a textured belt the
-            # knurl comes near a face, and min_contrast keeps those windows out).
-            measure = dataclasses.replace(measure, min_contrast=float(seg.faint_threshold))
-        textured = seg.model == "textured"
-        self.measurer = Measurer(mapper, measure, _TEXTURE_BLUR_PX if textured else 0.0, coarse_reference=textured)
-        # The belt's own motion is measured where the belt model needs it (textured belts).
-        self.motion = BeltMotion(roi) if textured else None
-        self._roi_centre_px = np.array(cv2.boundingRect(roi), dtype=np.float64)
+        self._roi = roi_mask(self.roi_px, calibration.size)
+        self.roi_mask = None if self.roi_px is None else self._roi
+        self._roi_centre_px = np.array(cv2.boundingRect(self._roi), dtype=np.float64)
         self._roi_centre_px = self._roi_centre_px[:2] + self._roi_centre_px[2:] / 2
-        self._last_t_ns: int | None = None
-        self._belt_mm_s = (0.0, 0.0)
-        # Blobs this close to the region's edge are clipped (the measurement itself checks the image's).
-        edge_px = self.config.measure.border_margin_px + getattr(self.segmenter, "edge_px", 0)
-        self.guard = ClutterGuard(roi, seg.scene_fault_fraction, seg.max_blobs,
-                                  edge_px if self.roi_px is not None or seg.model == "textured" else 0)
+        self.mapper = mapper = BeltMapper(calibration, self.config.measure.part_height_mm)
+        # With "auto", the plain model until the belt's own look is seen to move (then _use_model).
+        self._look = MovingLook(seg, self._roi) if seg.model == "auto" else None
+        self._use_model("reference" if seg.model == "auto" else seg.model)
         outline = mapper.view_outline_mm().astype(np.float32)
-        # Where the belt has carried a point since the start (mm, world frame). With the belt's motion
-        # measured, parts are tracked on the belt, where a part riding it stands still through the
-        # belt's stops, slow phases and duplicate frames; without it the offset stays zero.
-        self._belt_offset_mm = np.zeros(2)
         # With --part-height auto, a part's views vote on its height track.height_vote_step_mm apart, closer
         # on a small view (a fraction of the square root of the belt area it sees): a part crossing it
         # decides as early in its crossing as one crossing a larger view.
@@ -95,9 +79,49 @@ class Pipeline:
         # Time spent per stage on the last frame (ns); for the status line and the benchmark only.
         self.stage_ns = dict.fromkeys(STAGES, 0)
 
+    def _use_model(self, model: str) -> None:
+        """Segment and measure with belt model ``model`` ("reference" or "textured") from the next frame on."""
+        self.model = model
+        seg, measure = self.config.segment, self.config.measure
+        roi = self._roi
+        self.segmenter = make_segmenter(dataclasses.replace(seg, model=model), roi,
+                                        self.calibration.mm_per_px_at_centre())
+        if model == "reference" and 0 < seg.faint_threshold < measure.min_contrast:
+            # The faint faces the plain belt model joins to a part are read too (on a textured belt the
+            # knurl comes near a face, and min_contrast keeps those windows out).
+            measure = dataclasses.replace(measure, min_contrast=float(seg.faint_threshold))
+        textured = model == "textured"
+        self.measurer = Measurer(self.mapper, measure, _TEXTURE_BLUR_PX if textured else 0.0,
+                                 coarse_reference=textured)
+        # The belt's own motion is measured where the belt model needs it (textured belts).
+        self.motion = BeltMotion(roi) if textured else None
+        self._last_t_ns: int | None = None
+        self._belt_mm_s = (0.0, 0.0)
+        # Blobs this close to the region's edge are clipped (the measurement itself checks the image's).
+        edge_px = measure.border_margin_px + getattr(self.segmenter, "edge_px", 0)
+        self.guard = ClutterGuard(roi, seg.scene_fault_fraction, seg.max_blobs,
+                                  edge_px if self.roi_px is not None or textured else 0)
+        # Where the belt has carried a point since the start (mm, world frame). With the belt's motion
+        # measured, parts are tracked on the belt, where a part riding it stands still through the
+        # belt's stops, slow phases and duplicate frames; without it the offset stays zero.
+        self._belt_offset_mm = np.zeros(2)
+
+    def _watch_look(self, index: int, frame: np.ndarray) -> None:
+        """segment.model "auto": once the belt's own look moves with it, the textured model from this frame
+        on; the tracks the plain model made of the moving belt end (their ids are not used again)."""
+        if self._look is None or not self._look(frame):
+            return
+        log.info("belt model: the belt's own look moves with it (%.0f %% of the view's tiles change from frame to "
+                 "frame): the textured belt model from frame %d on (segment.model chooses one)",
+                 100 * self._look.changing, index)
+        self._look = None
+        self._use_model("textured")
+        self.tracker.tracks.clear()
+
     def process(self, index: int, frame: np.ndarray, t_ns: int) -> FrameResult:
         clock = time.perf_counter_ns
         t0 = clock()
+        self._watch_look(index, frame)
         belt = self._belt_motion(frame, t_ns)
         mask = self.segmenter(frame)
         if self.roi_mask is not None and self.motion is None:

@@ -2,9 +2,10 @@
 
 Two belt models behind one interface (``segment.model`` in the configuration):
 ``reference`` (reference.py) for belts whose look stays put, exact to sub-pixel edges;
-``textured`` (textured.py) for real belts whose texture moves with the parts. Around
-them: the region of interest (roi.py), the belt's motion (motion.py) and the clutter
-guard (guard.py).
+``textured`` (textured.py) for real belts whose texture moves with the parts; ``auto``
+(the default) is the first until look.py sees the belt's own look move, then the second
+(the pipeline switches). Around them: the region of interest (roi.py), the belt's motion
+(motion.py) and the clutter guard (guard.py).
 """
 
 from __future__ import annotations
@@ -32,8 +33,8 @@ class BeltModel(Protocol):
 
 
 def make_segmenter(config: SegmentConfig, roi: np.ndarray, mm_per_px: float = 1.0) -> BeltModel:
-    """The configured belt model; ``roi`` is the region of interest (uint8 mask), ``mm_per_px`` the
-    belt's scale at the image centre."""
+    """Belt model ``config.model`` ("reference" or "textured"; "auto" is the pipeline's to resolve); ``roi``
+    is the region of interest (uint8 mask), ``mm_per_px`` the belt's scale at the image centre."""
     if config.model == "textured":
         return TexturedSegmenter(config, roi, mm_per_px)
     return Segmenter(config, roi)

@@ -1,0 +1,118 @@
+"""segment.model "auto" (the default): the plain belt model until the belt's own look is seen to move with
+it, then the textured one (tracker/segment/look.py)."""
+
+from __future__ import annotations
+
+import logging
+import re
+
+import cv2
+import numpy as np
+import pytest
+from conftest import run_pipeline
+from textured_support import textured_run
+
+from tracker.config import SegmentConfig, TrackerConfig
+from tracker.errors import BadInput
+from tracker.evaluate import evaluate
+from tracker.pipeline import Pipeline
+from tracker.scenes import nadir
+from tracker.segment.look import MovingLook
+from tracker.synthetic import CameraSpec
+
+FRAMES = SegmentConfig().auto_frames
+SHAPE = (240, 320)
+
+
+def _diamonds(shift_px: int, shape: tuple[int, int] = SHAPE) -> np.ndarray:
+    """A diamond-knurled belt (levels 30-110, a 20 px period) carried ``shift_px`` along +x."""
+    v, u = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float32)
+    u -= shift_px
+    knurl = np.sin(2 * np.pi * (u + v) / 20.0) * np.sin(2 * np.pi * (u - v) / 20.0)
+    return np.clip(70 + 40 * knurl, 0, 255).astype(np.uint8)
+
+
+def _plain_with_part(i: int, noise_rng: np.random.Generator | None = None) -> np.ndarray:
+    """A plain belt (level 60) under a bright 80 x 50 px part carried 10 px per frame along +x."""
+    image = np.full(SHAPE, 60.0, np.float32)
+    x = -80 + 10 * i
+    cv2.rectangle(image, (x, 90), (x + 80, 140), 200.0, -1)
+    if noise_rng is not None:
+        image += noise_rng.normal(0, 4, SHAPE)
+    return np.clip(image, 0, 255).astype(np.uint8)
+
+
+def _watched(frames, roi: np.ndarray | None = None) -> list[bool]:
+    look = MovingLook(SegmentConfig(), np.full(SHAPE, 255, np.uint8) if roi is None else roi)
+    return [look(f) for f in frames]
+
+
+def test_a_knurled_belt_moving_is_told_after_as_many_new_frames_as_the_median_takes():
+    seen = _watched([_diamonds(3 * i) for i in range(30)])
+    # The first frame has none before it: the FRAMES-th new frame after it decides, and for good.
+    assert seen.index(True) == FRAMES and all(seen[FRAMES:])
+
+
+def test_repeated_frames_are_not_new():
+    """Each frame shown twice (a frame-rate conversion): only the new ones count."""
+    seen = _watched([_diamonds(3 * (i // 2)) for i in range(40)])
+    assert seen.index(True) == 2 * FRAMES
+
+
+@pytest.mark.parametrize("noisy", [False, True], ids=["clean", "sensor_noise_4"])
+def test_a_part_crossing_a_plain_belt_is_not_a_moving_look(noisy):
+    rng = np.random.default_rng(5) if noisy else None
+    assert not any(_watched([_plain_with_part(i, rng) for i in range(40)]))
+
+
+def test_a_still_knurled_belt_and_a_flash_are_not_a_moving_look():
+    """The belt stands still (its texture is learnt as it is); one frame 60 levels brighter (a lamp) changes
+    every tile, once."""
+    frames = [_diamonds(0) for _ in range(30)]
+    frames[12] = cv2.add(frames[12], 60)
+    assert not any(_watched(frames))
+
+
+def test_texture_moving_outside_the_region_of_interest_is_not_watched():
+    roi = np.zeros(SHAPE, np.uint8)
+    roi[:, :100] = 255
+    frames = [_diamonds(3 * i) for i in range(30)]
+    for f in frames:
+        f[:, :100] = 60  # plain inside the region, knurled beyond it
+    assert not any(_watched(frames, roi))
+    assert any(_watched(frames))
+
+
+def test_the_default_model_stays_plain_on_a_plain_belt():
+    """A rendered plain belt: "auto" measures exactly as "reference" does (same poses, every frame)."""
+    auto, _ = run_pipeline(nadir(300.0))
+    reference, _ = run_pipeline(nadir(300.0), TrackerConfig(segment=SegmentConfig(model="reference")))
+    assert auto == reference and sum(bool(p["objects"]) for p in auto) > 100
+
+
+def test_the_default_model_turns_textured_on_a_knurled_moving_belt(caplog):
+    """The tests' knurled belt (diamonds, grain, marks, moving 4 px a frame, through MPEG-4): the plain
+    model invents parts there (tests/test_textured_belt.py); "auto" turns to the textured model, says so
+    once, and then finds only the part, at the textured model's accuracy."""
+    frames, truths, t_ns = textured_run(30.0)
+    pipeline = Pipeline(CameraSpec().calibration())
+    with caplog.at_level(logging.INFO, logger="tracker.pipeline"):
+        results = [pipeline.process(i, f, t) for i, (f, t) in enumerate(zip(frames[:90], t_ns, strict=False))]
+    assert pipeline.model == "textured"
+    (line,) = [r.getMessage() for r in caplog.records if "belt model" in r.getMessage()]
+    switched = int(re.search(r"textured belt model from frame (\d+)", line).group(1))
+    assert FRAMES <= switched <= 3 * FRAMES, line
+    # Its first frames learn the belt (a part in view is tracked from its next move on).
+    start = switched + 30
+    poses = [r.to_dict() for r in results[start:]]
+    acc = evaluate(poses, truths[start:len(results)], skip_first=0)
+    assert len({o["id"] for p in poses for o in p["objects"]}) == 1
+    assert acc.visible_frames > 20 and acc.false_objects == 0
+    assert acc.summary()["centroid_mean_mm"] <= 0.1, acc.summary()
+
+
+@pytest.mark.parametrize(("setting", "value"), [("auto_moving_share", 1.5), ("auto_tile_changed", 0.0),
+                                                ("auto_frames", 0), ("auto_tiles", -2)])
+def test_bad_auto_settings_are_one_clear_line(setting, value):
+    with pytest.raises(BadInput, match=f"{setting}: expected"):
+        TrackerConfig.from_dict({"segment": {setting: value}})

@@ -1,0 +1,86 @@
+"""Whether the belt's own look moves with it: the belt model ``segment.model: "auto"`` turns to.
+
+The reference model (reference.py) learns the empty belt only where a frame differs from the one
+before by at most ``segment.motion_threshold``: a belt whose texture, streaks or seams change by more
+than that as it moves cannot be learnt, and its look becomes foreground. Such a belt changes the
+whole view from frame to frame, parts only where their edges pass. So the region of interest is cut
+into tiles, and the share of tiles in which the frame changed (its difference from the one before,
+averaged over 3 x 3 pixels so that sensor noise does not count) is watched: 0.9 of them on the
+diamond-textured real belt, 0.6 among the CCTV clip's rollers, 0.3 on the fine grey belt of the
+mixed-items video (its streaks: the reference model invents 42 parts there), 0.5 on the tests'
+knurled belt (tests/textured_support.py); on rendered plain belts with one to five parts in view at
+most 0.15, with sensor noise of 4 grey levels too. One frame can change everywhere (a light switched
+on, an exposure step): the median over several new frames decides, and a repeated frame (a
+frame-rate conversion) is not new.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import cv2
+import numpy as np
+
+from tracker.config import SegmentConfig
+
+# A tile is watched when at least this share of it lies in the region of interest.
+_TILE_IN_ROI = 0.5
+# Frames differing by less than this (mean |diff|, grey levels, over the region) repeat each other.
+_REPEAT_LEVEL = 0.3
+# The region is watched through at most this many pixels on its longer side, every so many pixels
+# picked (not averaged: averaging would smooth away the very texture watched): the cost stays bounded.
+_WATCH_PX = 640
+
+
+class MovingLook:
+    """Frame in, whether the belt's own look has been seen to move with it (for good once it has)."""
+
+    def __init__(self, config: SegmentConfig, roi: np.ndarray) -> None:
+        """``roi``: the region of interest (uint8 mask, > 0 inside)."""
+        self._cfg = config
+        x, y, w, h = cv2.boundingRect(roi)
+        self._box = (slice(y, y + h), slice(x, x + w))
+        scale = min(1.0, _WATCH_PX / max(w, h))
+        self._size = (max(1, round(w * scale)), max(1, round(h * scale))) if scale < 1 else None
+        self._roi = self._picked(roi[self._box])
+        n = config.auto_tiles
+        # Tiles as square as the region allows, auto_tiles along its longer side.
+        self._grid = (n, max(1, round(n * h / w))) if w >= h else (max(1, round(n * w / h)), n)
+        self._in_roi = self._share(self._roi) >= _TILE_IN_ROI * 255
+        self._roi_px = max(1, cv2.countNonZero(self._roi))
+        self._whole = self._roi_px == self._roi.size
+        self._prev: np.ndarray | None = None
+        self._shares: deque[float] = deque(maxlen=config.auto_frames)
+        self.moving = False
+        # The median share of tiles changing over the last auto_frames new frames (0 before as many).
+        self.changing = 0.0
+
+    def __call__(self, frame: np.ndarray) -> bool:
+        if self.moving:
+            return True
+        patch = self._picked(frame[self._box])
+        prev, self._prev = self._prev, patch if self._size else patch.copy()
+        if prev is None:
+            return False
+        diff = cv2.absdiff(patch, prev)
+        if not self._whole:
+            diff = cv2.bitwise_and(diff, self._roi)
+        if cv2.sumElems(diff)[0] / self._roi_px < _REPEAT_LEVEL:
+            return False
+        changed = self._share(cv2.compare(cv2.blur(diff, (3, 3)), self._cfg.motion_threshold, cv2.CMP_GT))
+        tiles = changed[self._in_roi] > self._cfg.auto_tile_changed * 255
+        self._shares.append(float(tiles.mean()) if tiles.size else 0.0)
+        if len(self._shares) == self._shares.maxlen:
+            self.changing = float(np.median(self._shares))
+            self.moving = self.changing >= self._cfg.auto_moving_share
+        return self.moving
+
+    def _picked(self, image: np.ndarray) -> np.ndarray:
+        """``image`` (of the region's box) at the watched size, its pixels picked."""
+        if self._size is None:
+            return image
+        return cv2.resize(image, self._size, interpolation=cv2.INTER_NEAREST)
+
+    def _share(self, mask: np.ndarray) -> np.ndarray:
+        """Each tile's share of ``mask``'s set pixels (0-255 for 0-1, one per tile; 8 bits are plenty)."""
+        return cv2.resize(mask, self._grid, interpolation=cv2.INTER_AREA)
