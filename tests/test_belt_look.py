@@ -12,13 +12,12 @@ import pytest
 from conftest import run_pipeline
 from textured_support import textured_run
 
-from tracker.config import SegmentConfig, TrackerConfig
+from tracker.config import MeasureConfig, SegmentConfig, TrackerConfig
 from tracker.errors import BadInput
 from tracker.evaluate import evaluate
 from tracker.pipeline import Pipeline
-from tracker.scenes import nadir
 from tracker.segment.look import MovingLook
-from tracker.synthetic import CameraSpec
+from tracker.synthetic import CameraSpec, PartSpec, SceneSpec
 
 FRAMES = SegmentConfig().auto_frames
 SHAPE = (240, 320)
@@ -83,11 +82,41 @@ def test_texture_moving_outside_the_region_of_interest_is_not_watched():
     assert any(_watched(frames))
 
 
+def test_a_lamp_flickering_over_a_plain_belt_is_not_a_moving_look():
+    """The whole view 10 levels brighter and darker in turn (a lamp's flicker against a short exposure),
+    a part crossing: the region's mean step is no texture."""
+    frames = [_plain_with_part(i) for i in range(40)]
+    frames = [cv2.add(f, 10) if i % 2 else cv2.subtract(f, 10) for i, f in enumerate(frames)]
+    assert not any(_watched(frames))
+
+
 def test_the_default_model_stays_plain_on_a_plain_belt():
-    """A rendered plain belt: "auto" measures exactly as "reference" does (same poses, every frame)."""
-    auto, _ = run_pipeline(nadir(300.0))
-    reference, _ = run_pipeline(nadir(300.0), TrackerConfig(segment=SegmentConfig(model="reference")))
-    assert auto == reference and sum(bool(p["objects"]) for p in auto) > 100
+    """A rendered plain belt: "auto" measures exactly as "reference" does, every frame; only until as many
+    new frames as the median takes are watched is no part pickable (the belt model is not yet settled)."""
+    # The part in view from the start, crossing the view's right half.
+    scene = SceneSpec(CameraSpec(), (PartSpec(80, 50, 0, -60, 12, 25, 300.0, 0),), 60.0, 60)
+    auto, _ = run_pipeline(scene)
+    reference, _ = run_pipeline(scene, TrackerConfig(segment=SegmentConfig(model="reference")))
+    assert sum(bool(p["objects"]) for p in auto) > 50
+    held = [p for p in auto[:FRAMES] if p["objects"]]
+    assert held and all(not o["pickable"] for p in held for o in p["objects"])
+    assert any(o["pickable"] for p in reference[:FRAMES] for o in p["objects"])
+    unpicked = [dict(p, objects=[dict(o, pickable=False) for o in p["objects"]]) for p in reference[:FRAMES]]
+    assert auto[:FRAMES] == unpicked and auto[FRAMES:] == reference[FRAMES:]
+
+
+def test_a_region_too_thin_to_watch_is_said_once(caplog):
+    """A 6 px diagonal band: no tile lies half in it, so the belt's look cannot be watched: one warning,
+    and the plain model throughout (no frame held back either)."""
+    band = ((0, 4), (4, 0), (320, 316), (316, 320))
+    config = TrackerConfig(segment=SegmentConfig(roi_px=band))
+    with caplog.at_level(logging.WARNING, logger="tracker.pipeline"):
+        pipeline = Pipeline(CameraSpec(width=320, height=320).calibration(), config)
+    assert [r.getMessage() for r in caplog.records if "too thin" in r.getMessage()]
+    assert pipeline.model == "reference"
+    for i in range(3 * FRAMES):
+        pipeline.process(i, _diamonds(3 * i, (320, 320)), round(i * 1e9 / 30))
+    assert pipeline.model == "reference"
 
 
 def test_the_default_model_turns_textured_on_a_knurled_moving_belt(caplog):
@@ -102,6 +131,8 @@ def test_the_default_model_turns_textured_on_a_knurled_moving_belt(caplog):
     (line,) = [r.getMessage() for r in caplog.records if "belt model" in r.getMessage()]
     switched = int(re.search(r"textured belt model from frame (\d+)", line).group(1))
     assert FRAMES <= switched <= 3 * FRAMES, line
+    # Nothing the plain model made of the moving knurl was offered for picking.
+    assert not any(o.pickable for r in results[:switched] for o in r.objects)
     # Its first frames learn the belt (a part in view is tracked from its next move on).
     start = switched + 30
     poses = [r.to_dict() for r in results[start:]]
@@ -116,3 +147,28 @@ def test_the_default_model_turns_textured_on_a_knurled_moving_belt(caplog):
 def test_bad_auto_settings_are_one_clear_line(setting, value):
     with pytest.raises(BadInput, match=f"{setting}: expected"):
         TrackerConfig.from_dict({"segment": {setting: value}})
+
+
+def test_a_part_offered_while_the_belt_stood_keeps_its_id_when_the_model_turns():
+    """A part put on a standing knurled belt is tracked by the plain model and offered for picking; the belt
+    then moves: the model turns textured, and the part goes on under the same id (a PLC that took it is
+    not offered it again under another), while what the plain model made of the moving knurl ends."""
+    h, w, stand, step = 480, 640, 30, 3
+    travel = step * 70
+    v, u = np.mgrid[0:h, 0:w + travel].astype(np.float32)
+    bare = 70 + 40 * np.sin(2 * np.pi * (u + v) / 20.0) * np.sin(2 * np.pi * (u - v) / 20.0)
+    with_part = cv2.rectangle(bare.copy(), (travel + 250, 200), (travel + 330, 250), 200.0, -1)
+    rng = np.random.default_rng(0)
+    pipeline = Pipeline(CameraSpec().calibration(), TrackerConfig(measure=MeasureConfig(estimate_height=False)))
+    results = []
+    for i in range(100):
+        shift = step * max(0, i - stand)
+        belt = (bare if i < 5 else with_part)[:, travel - shift: travel - shift + w]
+        frame = np.clip(np.rint(belt + rng.normal(0, 2, (h, w))), 0, 255).astype(np.uint8)
+        results.append(pipeline.process(i, frame, round(i * 1e9 / 30)))
+    assert pipeline.model == "textured"
+    offered = {o.id for r in results[:stand] for o in r.objects if o.pickable}
+    assert len(offered) == 1
+    later = results[-40:]
+    assert all(len(r.objects) == 1 and r.objects[0].measured for r in later)
+    assert {o.id for r in later for o in r.objects} == offered

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from tracker.cli import main
+from tracker.config import SegmentConfig
 from tracker.evaluate import evaluate
 
 
@@ -34,9 +35,10 @@ def test_run_writes_the_contract_pose_stream(scene_dir, tmp_path):
         for obj in pose["objects"]:
             assert list(obj) == ["id", "x_mm", "y_mm", "angle_deg", "length_mm", "width_mm", "corners_mm",
                                  "vx_mm_s", "vy_mm_s", "height_mm", "measured", "pickable", "height_converged"]
-            # One part alone: nothing keeps it from the arm; its height is estimated (auto, the default)
-            # and said to be settled only once it is: flat.
-            assert obj["pickable"] is True
+            # One part alone: nothing keeps it from the arm once the belt model has settled (auto, the
+            # default: over the first segment.auto_frames new frames); its height is estimated (auto, the
+            # default) and said to be settled only once it is: flat.
+            assert obj["pickable"] is (index >= SegmentConfig().auto_frames)
             assert not obj["height_converged"] or obj["height_mm"] == 0.0, obj
             c = np.array(obj["corners_mm"])
             area = 0.5 * (np.dot(c[:, 0], np.roll(c[:, 1], -1)) - np.dot(c[:, 1], np.roll(c[:, 0], -1)))

@@ -44,10 +44,12 @@ class SegmentConfig:
     # the parts: texture-suppressed levels against per-pixel statistics of the passing belt), or
     # "auto": "reference" until the belt's own look is seen to move with it, then "textured" for
     # good (segment/look.py): the region of interest cut into auto_tiles tiles along its longer
-    # side, a tile changing where more than auto_tile_changed of its pixels differ from the last
-    # frame by more than motion_threshold (3 x 3 means), the look moving once the median share of
-    # tiles changing over auto_frames new frames reaches auto_moving_share (real belts 0.3-0.9,
-    # rendered plain belts with up to five parts at most 0.15).
+    # side, a tile changing where about auto_tile_changed of its pixels or more differ from the last
+    # frame by more than motion_threshold (3 x 3 means, the region's mean step taken out), the look
+    # moving once the median share of tiles changing over auto_frames new frames reaches
+    # auto_moving_share (real belts 0.2-0.8, rendered plain belts with up to five parts at most
+    # 0.17). Until auto_frames new frames are watched, and while the last changed that many tiles,
+    # no part is pickable.
     model: str = "auto"
     auto_tiles: int = 16
     auto_tile_changed: float = 0.01
@@ -86,6 +88,8 @@ class SegmentConfig:
         _positive(self, "diff_threshold", "motion_threshold", "background_every", "startup_frames",
                   "absorb_after_frames", "open_kernel_px", "max_blobs", "textured_work_px",
                   "textured_threshold", "textured_sigmas", "min_part_contrast", "auto_tiles", "auto_frames")
+        if self.auto_tiles > 64:
+            raise BadInput(f"segment.auto_tiles: expected at most 64 tiles along the region, got {self.auto_tiles}")
         for name in ("auto_tile_changed", "auto_moving_share"):
             if not 0 < getattr(self, name) < 1:
                 raise BadInput(f"segment.{name}: expected a share 0 < s < 1, got {getattr(self, name)}")

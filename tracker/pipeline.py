@@ -65,6 +65,12 @@ class Pipeline:
         self.mapper = mapper = BeltMapper(calibration, self.config.measure.part_height_mm)
         # With "auto", the plain model until the belt's own look is seen to move (then _use_model).
         self._look = MovingLook(seg, self._roi) if seg.model == "auto" else None
+        self._offered_ids: set[int] = set()
+        if self._look is not None and not self._look.watched_tiles:
+            log.warning("belt model: the region of interest is too thin to watch the belt's look (no tile of %d "
+                        "along its longer side lies half in it): the plain belt model throughout; set "
+                        "segment.model to \"textured\" for a belt whose texture moves", seg.auto_tiles)
+            self._look = None
         self._use_model("reference" if seg.model == "auto" else seg.model)
         outline = mapper.view_outline_mm().astype(np.float32)
         # With --part-height auto, a part's views vote on its height track.height_vote_step_mm apart, closer
@@ -108,7 +114,7 @@ class Pipeline:
 
     def _watch_look(self, index: int, frame: np.ndarray) -> None:
         """segment.model "auto": once the belt's own look moves with it, the textured model from this frame
-        on; the tracks the plain model made of the moving belt end (their ids are not used again)."""
+        on."""
         if self._look is None or not self._look(frame):
             return
         log.info("belt model: the belt's own look moves with it (%.0f %% of the view's tiles change from frame to "
@@ -116,7 +122,11 @@ class Pipeline:
                  100 * self._look.changing, index)
         self._look = None
         self._use_model("textured")
-        self.tracker.tracks.clear()
+        # Tracks of parts offered for picking (seen while the belt stood: its look then does not move) go on
+        # under their ids, in the belt's frame, which is the world's at this instant: a PLC that took one
+        # is not offered it again under a new id. The rest were held back and end (mostly the moving belt).
+        self.tracker.tracks[:] = [t for t in self.tracker.tracks if t.id in self._offered_ids]
+        self._offered_ids = set()
 
     def process(self, index: int, frame: np.ndarray, t_ns: int) -> FrameResult:
         clock = time.perf_counter_ns
@@ -137,6 +147,13 @@ class Pipeline:
                             for m in measurements]
         t2 = clock()
         objects = self._track(measurements, t_ns, belt)
+        if self._look is not None:
+            if self._look.unsure:
+                # The belt model is not settled (auto, its first frames or a belt starting to move): what the
+                # plain model makes of a moving textured belt is no part to pick.
+                objects = tuple(dataclasses.replace(o, pickable=False) for o in objects)
+            # The parts in view offered for picking (until the model turns: see _watch_look).
+            self._offered_ids = {o.id for o in objects if o.pickable} | (self._offered_ids & {o.id for o in objects})
         if self._height_mm:
             objects = tuple(dataclasses.replace(o, height_mm=self._height_mm) for o in objects)
         t3 = clock()

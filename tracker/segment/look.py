@@ -5,13 +5,15 @@ before by at most ``segment.motion_threshold``: a belt whose texture, streaks or
 than that as it moves cannot be learnt, and its look becomes foreground. Such a belt changes the
 whole view from frame to frame, parts only where their edges pass. So the region of interest is cut
 into tiles, and the share of tiles in which the frame changed (its difference from the one before,
-averaged over 3 x 3 pixels so that sensor noise does not count) is watched: 0.9 of them on the
-diamond-textured real belt, 0.6 among the CCTV clip's rollers, 0.3 on the fine grey belt of the
-mixed-items video (its streaks: the reference model invents 42 parts there), 0.5 on the tests'
-knurled belt (tests/textured_support.py); on rendered plain belts with one to five parts in view at
-most 0.15, with sensor noise of 4 grey levels too. One frame can change everywhere (a light switched
-on, an exposure step): the median over several new frames decides, and a repeated frame (a
-frame-rate conversion) is not new.
+averaged over 3 x 3 pixels so that sensor noise does not count, the whole region's mean step taken
+out so that a lamp's flicker does not either) is watched. Its median over 9 frames (measured, see
+docs/HISTORY.md): 0.81 on the diamond-textured real belt, 0.47 among the CCTV clip's rollers, 0.34 on
+the tests' knurled belt (tests/textured_support.py), 0.21 (0.32 at most) on the fine grey belt of the
+mixed-items video, whose streaks the reference model turns into parts; on rendered plain belts with
+one to five parts in view at most 0.17, with sensor noise of 4 grey levels too. A part with a printed
+top covering a third of the view or more changes as many tiles as a moving belt does. One frame can
+change everywhere (a part's shadow, a hand): the median over several new frames decides, and a
+repeated frame (a frame-rate conversion) is not new.
 """
 
 from __future__ import annotations
@@ -55,6 +57,18 @@ class MovingLook:
         # The median share of tiles changing over the last auto_frames new frames (0 before as many).
         self.changing = 0.0
 
+    @property
+    def watched_tiles(self) -> int:
+        """How many tiles are watched (0: the region is too thin for any to lie half in it)."""
+        return int(np.count_nonzero(self._in_roi))
+
+    @property
+    def unsure(self) -> bool:
+        """Whether the belt's look may be moving though not yet seen to: fewer than auto_frames new frames
+        watched, or the last changed as many tiles as a moving look does (a belt that starts to move)."""
+        return not self.moving and (len(self._shares) < self._shares.maxlen
+                                    or self._shares[-1] >= self._cfg.auto_moving_share)
+
     def __call__(self, frame: np.ndarray) -> bool:
         if self.moving:
             return True
@@ -62,7 +76,10 @@ class MovingLook:
         prev, self._prev = self._prev, patch if self._size else patch.copy()
         if prev is None:
             return False
-        diff = cv2.absdiff(patch, prev)
+        signed = cv2.subtract(patch, prev, dtype=cv2.CV_16S)
+        # The whole region's step (a lamp's flicker, an exposure change) is no texture: taken out.
+        step = cv2.mean(signed, mask=None if self._whole else self._roi)[0]
+        diff = cv2.convertScaleAbs(signed, alpha=1.0, beta=-step)
         if not self._whole:
             diff = cv2.bitwise_and(diff, self._roi)
         if cv2.sumElems(diff)[0] / self._roi_px < _REPEAT_LEVEL:
