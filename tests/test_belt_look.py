@@ -12,7 +12,7 @@ import pytest
 from conftest import run_pipeline
 from textured_support import textured_run
 
-from tracker.config import MeasureConfig, SegmentConfig, TrackerConfig
+from tracker.config import MeasureConfig, SegmentConfig, TrackConfig, TrackerConfig
 from tracker.errors import BadInput
 from tracker.evaluate import evaluate
 from tracker.pipeline import Pipeline
@@ -128,6 +128,8 @@ def test_the_default_model_turns_textured_on_a_knurled_moving_belt(caplog):
     with caplog.at_level(logging.INFO, logger="tracker.pipeline"):
         results = [pipeline.process(i, f, t) for i, (f, t) in enumerate(zip(frames[:90], t_ns, strict=False))]
     assert pipeline.model == "textured"
+    # Tracks made from now on take the coarse reference's settings (tests/test_height_auto.py).
+    assert pipeline.tracker.config.view_height_sigma_mm == TrackConfig().view_height_sigma_coarse_mm
     (line,) = [r.getMessage() for r in caplog.records if "belt model" in r.getMessage()]
     switched = int(re.search(r"textured belt model from frame (\d+)", line).group(1))
     assert FRAMES <= switched <= 3 * FRAMES, line

@@ -316,6 +316,12 @@ class TrackConfig:
     start_height_span_fraction: float = 0.125
     view_height_sigma_mm: float = 0.3
     view_size_sigma_mm: float = 0.15
+    # ... and on the textured belt model's coarse reference no surer than this: its views misread a
+    # part's edges alike from frame to frame (the reference learnt at low resolution, a codec's blocks),
+    # so what they tell together is less than their sum (bench/heights_random.py --textured, 60
+    # scenes: at 0.3 about ten converged 0.5-1.3 mm off; at 0.5, 43 meet every bound, 40 before;
+    # at 0.5 for every model the sharp sets lost 3-4 scenes each, late: docs/HISTORY.md).
+    view_height_sigma_coarse_mm: float = 0.5
     # A view that tells its own height (its size marginalised out) less surely than this (1 sigma, mm)
     # adds nothing to the estimate: it shows hardly any side face (near the middle of the view, a thin
     # part), so it tells the height only from the part's apparent size, which an edge bias of a

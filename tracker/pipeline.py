@@ -80,7 +80,7 @@ class Pipeline:
         view_size_mm = math.sqrt(cv2.contourArea(outline))
         vote_step_mm = (min(track.height_vote_step_mm, track.height_vote_step_fraction * view_size_mm)
                         if self.config.measure.estimate_height else None)
-        self.tracker = Tracker(self.config.track, lambda x, y: cv2.pointPolygonTest(
+        self.tracker = Tracker(self._track_config, lambda x, y: cv2.pointPolygonTest(
             outline, (x + self._belt_offset_mm[0], y + self._belt_offset_mm[1]), False) >= 0, vote_step_mm)
         # Time spent per stage on the last frame (ns); for the status line and the benchmark only.
         self.stage_ns = dict.fromkeys(STAGES, 0)
@@ -97,6 +97,11 @@ class Pipeline:
             # knurl comes near a face, and min_contrast keeps those windows out).
             measure = dataclasses.replace(measure, min_contrast=float(seg.faint_threshold))
         textured = model == "textured"
+        track = self.config.track
+        # The tracks' settings under this model (new tracks take them: see track.view_height_sigma_coarse_mm).
+        self._track_config = (dataclasses.replace(track, view_height_sigma_mm=max(track.view_height_sigma_mm,
+                                                                                  track.view_height_sigma_coarse_mm))
+                              if textured else track)
         self.measurer = Measurer(self.mapper, measure, _TEXTURE_BLUR_PX if textured else 0.0,
                                  coarse_reference=textured)
         # The belt's own motion is measured where the belt model needs it (textured belts).
@@ -122,6 +127,7 @@ class Pipeline:
                  100 * self._look.changing, index)
         self._look = None
         self._use_model("textured")
+        self.tracker.config = self._track_config
         # Tracks of parts offered for picking (seen while the belt stood: its look then does not move) go on
         # under their ids, in the belt's frame, which is the world's at this instant: a PLC that took one
         # is not offered it again under a new id. The rest were held back and end (mostly the moving belt).
