@@ -57,8 +57,16 @@ def _blur_along(px: int, vertical: bool) -> Callable[[np.ndarray], np.ndarray]:
     return lambda frame: cv2.filter2D(frame, -1, kernel, borderType=cv2.BORDER_REPLICATE)
 
 
+def _frame_flicker(levels: int) -> Callable[[np.ndarray], np.ndarray]:
+    """The whole view ``levels`` brighter and darker in turn, frame by frame (mains flicker against a
+    short exposure)."""
+    count = iter(range(10**9))
+    return lambda frame: (cv2.add if next(count) % 2 else cv2.subtract)(frame, levels)
+
+
 def _half_rate() -> Callable[[np.ndarray], np.ndarray]:
-    """Every other frame repeats the one before (a camera at half the rate, timestamps kept)."""
+    """Every other frame repeats the one before, capture times kept (a half-rate camera behind a
+    frame-rate conversion)."""
     state = {"i": 0, "last": None}
 
     def change(frame: np.ndarray) -> np.ndarray:
@@ -82,6 +90,7 @@ def changes(vertical_belt: bool) -> dict[str, Callable[[], Callable[[np.ndarray]
         "noise6": lambda: _noise(6.0),
         "jpeg10": lambda: _jpeg(10),
         "flicker10": lambda: _flicker(0.10, 30),
+        "frame_flicker10": lambda: _frame_flicker(10),
         "blur7": lambda: _blur_along(7, vertical_belt),
         "half_rate": _half_rate,
     }
@@ -93,6 +102,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--default-settings", action="store_true",
                         help="no settings at all, instead of each video's own")
     args = parser.parse_args(argv)
+    unknown = set(args.only or ()) - set(changes(False))
+    if unknown:
+        parser.error(f"--only: expected one of {sorted(changes(False))}, got {sorted(unknown)}")
     if not DATA.is_dir():
         print(f"real videos perturbed: skipped ({DATA} is absent)")
         return 0

@@ -128,9 +128,9 @@ class Pipeline:
         self._look = None
         self._use_model("textured")
         self.tracker.config = self._track_config
-        # Tracks of parts offered for picking (seen while the belt stood: its look then does not move) go on
-        # under their ids, in the belt's frame, which is the world's at this instant: a PLC that took one
-        # is not offered it again under a new id. The rest were held back and end (mostly the moving belt).
+        # Tracks of parts offered for picking go on under their ids (a PLC that took one is not offered it
+        # again under a new id, if the textured model finds it before it coasts out), in the belt's frame,
+        # which is the world's at this instant. The rest were never offered and end (mostly the moving belt).
         self.tracker.tracks[:] = [t for t in self.tracker.tracks if t.id in self._offered_ids]
         self._offered_ids = set()
 

@@ -11,7 +11,7 @@ docs/HISTORY.md): 0.81 on the diamond-textured real belt, 0.47 among the CCTV cl
 the tests' knurled belt (tests/textured_support.py), 0.21 (0.32 at most) on the fine grey belt of the
 mixed-items video, whose streaks the reference model turns into parts; on rendered plain belts with
 one to five parts in view at most 0.17, with sensor noise of 4 grey levels too. A part with a printed
-top covering a third of the view or more changes as many tiles as a moving belt does. One frame can
+top covering 40 % of the view changes as many tiles as a moving belt does (0.33). One frame can
 change everywhere (a part's shadow, a hand): the median over several new frames decides, and a
 repeated frame (a frame-rate conversion) is not new.
 """
@@ -54,6 +54,8 @@ class MovingLook:
         self._prev: np.ndarray | None = None
         self._shares: deque[float] = deque(maxlen=config.auto_frames)
         self.moving = False
+        # The share of tiles this frame changed (0 for the first and a repeated frame).
+        self.last_share = 0.0
         # The median share of tiles changing over the last auto_frames new frames (0 before as many).
         self.changing = 0.0
 
@@ -65,15 +67,16 @@ class MovingLook:
     @property
     def unsure(self) -> bool:
         """Whether the belt's look may be moving though not yet seen to: fewer than auto_frames new frames
-        watched, or the last changed as many tiles as a moving look does (a belt that starts to move)."""
+        watched, or this frame changed as many tiles as a moving look does (a belt that starts to move)."""
         return not self.moving and (len(self._shares) < self._shares.maxlen
-                                    or self._shares[-1] >= self._cfg.auto_moving_share)
+                                    or self.last_share >= self._cfg.auto_moving_share)
 
     def __call__(self, frame: np.ndarray) -> bool:
         if self.moving:
             return True
         patch = self._picked(frame[self._box])
         prev, self._prev = self._prev, patch if self._size else patch.copy()
+        self.last_share = 0.0
         if prev is None:
             return False
         signed = cv2.subtract(patch, prev, dtype=cv2.CV_16S)
@@ -82,11 +85,12 @@ class MovingLook:
         diff = cv2.convertScaleAbs(signed, alpha=1.0, beta=-step)
         if not self._whole:
             diff = cv2.bitwise_and(diff, self._roi)
-        if cv2.sumElems(diff)[0] / self._roi_px < _REPEAT_LEVEL:
-            return False
         changed = self._share(cv2.compare(cv2.blur(diff, (3, 3)), self._cfg.motion_threshold, cv2.CMP_GT))
         tiles = changed[self._in_roi] > self._cfg.auto_tile_changed * 255
-        self._shares.append(float(tiles.mean()) if tiles.size else 0.0)
+        if not tiles.any() and cv2.sumElems(diff)[0] / self._roi_px < _REPEAT_LEVEL:
+            return False  # a repeated frame (a slow part on a noiseless view changes a tile or two: new)
+        self.last_share = float(tiles.mean()) if tiles.size else 0.0
+        self._shares.append(self.last_share)
         if len(self._shares) == self._shares.maxlen:
             self.changing = float(np.median(self._shares))
             self.moving = self.changing >= self._cfg.auto_moving_share
