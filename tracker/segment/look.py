@@ -24,11 +24,10 @@ import cv2
 import numpy as np
 
 from tracker.config import SegmentConfig
+from tracker.segment.motion import DUPLICATE_LEVEL
 
 # A tile is watched when at least this share of it lies in the region of interest.
 _TILE_IN_ROI = 0.5
-# Frames differing by less than this (mean |diff|, grey levels, over the region) repeat each other.
-_REPEAT_LEVEL = 0.3
 # The region is watched through at most this many pixels on its longer side, every so many pixels
 # picked (not averaged: averaging would smooth away the very texture watched): the cost stays bounded.
 _WATCH_PX = 640
@@ -87,7 +86,7 @@ class MovingLook:
             diff = cv2.bitwise_and(diff, self._roi)
         changed = self._share(cv2.compare(cv2.blur(diff, (3, 3)), self._cfg.motion_threshold, cv2.CMP_GT))
         tiles = changed[self._in_roi] > self._cfg.auto_tile_changed * 255
-        if not tiles.any() and cv2.sumElems(diff)[0] / self._roi_px < _REPEAT_LEVEL:
+        if not tiles.any() and cv2.sumElems(diff)[0] / self._roi_px < DUPLICATE_LEVEL:
             return False  # a repeated frame (a slow part on a noiseless view changes a tile or two: new)
         self.last_share = float(tiles.mean()) if tiles.size else 0.0
         self._shares.append(self.last_share)

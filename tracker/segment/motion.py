@@ -25,7 +25,7 @@ _PATCH_PX = 256
 _MIN_RESPONSE = 0.05
 # Frames differing by less than this (mean |diff|, grey levels) repeat each other (a frame-rate
 # conversion): the belt did not stop, the frame is just not new; its last shift is kept.
-_DUPLICATE_LEVEL = 0.3
+DUPLICATE_LEVEL = 0.3
 # The surface between samples is evaluated from frequencies up to this (cycles per pixel, along
 # each axis): an averaged-down belt's texture is there, the higher ones are mostly noise.
 _BAND = 0.25
@@ -58,7 +58,7 @@ class BeltMotion:
             patch = cv2.resize(patch, self._size, interpolation=cv2.INTER_AREA)
         patch = patch.astype(np.float64)  # numpy's FFT is fastest in double precision
         prev, self._prev = self._prev, patch
-        self.duplicate = prev is not None and cv2.norm(patch, prev, cv2.NORM_L1) / patch.size < _DUPLICATE_LEVEL
+        self.duplicate = prev is not None and cv2.norm(patch, prev, cv2.NORM_L1) / patch.size < DUPLICATE_LEVEL
         if prev is None or self.duplicate:
             self._prev_spectrum = None  # that of another patch than the one now kept
             return self.shift_px
