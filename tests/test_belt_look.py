@@ -155,8 +155,9 @@ def test_bad_auto_settings_are_one_clear_line(setting, value):
 def test_a_part_offered_while_the_belt_stood_keeps_its_id_when_the_model_turns(step):
     """A part put on a standing knurled belt is tracked by the plain model and offered for picking; the belt
     then moves: the model turns textured, and the part goes on under the same id (a PLC that took it is
-    not offered it again under another), while what the plain model made of the moving knurl ends; its
-    velocity, carried over from the world's frame into the belt's, is the belt's again within 20 frames."""
+    not offered it again under another), while what the plain model made of the moving knurl ends. Its
+    track moves into the belt's frame with the belt's motion into the frame it turns at (carried over as
+    it was, in the world's, its velocity there read the belt's own speed: 189 and 225 mm/s)."""
     h, w, stand = 480, 640, 30
     moving = 45  # frames: the part stays in view
     travel = step * moving
@@ -170,9 +171,15 @@ def test_a_part_offered_while_the_belt_stood_keeps_its_id_when_the_model_turns(s
         shift = step * max(0, i - stand)
         belt = (bare if i < 5 else with_part)[:, travel - shift: travel - shift + w]
         frame = np.clip(np.rint(belt + rng.normal(0, 2, (h, w))), 0, 255).astype(np.uint8)
+        before = pipeline.model
         results.append(pipeline.process(i, frame, round(i * 1e9 / 30)))
+        if before != pipeline.model:
+            # Moved into the belt's frame, in which the part riding it stands, as it turned.
+            (kept,) = pipeline.tracker.tracks
+            turned_vx_mm_s = float(kept.kf.x[2, 0])
     assert pipeline.model == "textured"
     belt_mm_s = step * 30 * CameraSpec().calibration().mm_per_px_at_centre()
+    assert abs(turned_vx_mm_s) < 0.2 * belt_mm_s, turned_vx_mm_s
     offered = {o.id for r in results[:stand] for o in r.objects if o.pickable}
     assert len(offered) == 1
     later = results[-20:]

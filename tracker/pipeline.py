@@ -66,6 +66,10 @@ class Pipeline:
         # With "auto", the plain model until the belt's own look is seen to move (then _use_model).
         self._look = MovingLook(seg, self._roi) if seg.model == "auto" else None
         self._offered_ids: set[int] = set()
+        # Under auto: the last frame (the belt's motion into the frame the model turns at is measured from
+        # it), and whether the model has just turned.
+        self._last_frame: tuple[np.ndarray, int] | None = None
+        self._turned = False
         if self._look is not None and not self._look.watched_tiles:
             log.warning("belt model: the region of interest is too thin to watch the belt's look (no tile of %d "
                         "along its longer side lies half in it): the plain belt model throughout; set "
@@ -127,6 +131,13 @@ class Pipeline:
                  100 * self._look.changing, index)
         self._look = None
         self._use_model("textured")
+        # The belt's motion from the last frame to this one: the kept tracks move into its frame with it. (The
+        # last frame is held, not copied: from a source that reuses its buffer it reads as a repeat, no
+        # motion, and the tracks move into the belt's frame as they were.)
+        self.motion(self._last_frame[0])
+        self._last_t_ns = self._last_frame[1]
+        self._last_frame = None
+        self._turned = True
         self.tracker.config = self._track_config
         # Tracks of parts offered for picking go on under their ids (a PLC that took one is not offered it
         # again under a new id, if the textured model finds it before it coasts out), in the belt's frame,
@@ -139,6 +150,12 @@ class Pipeline:
         t0 = clock()
         self._watch_look(index, frame)
         belt = self._belt_motion(frame, t_ns)
+        if self._turned:
+            self._turned = False
+            for track in self.tracker.tracks:
+                track.into_frame_moving_at(*belt)
+        if self._look is not None:
+            self._last_frame = (frame, t_ns)
         mask = self.segmenter(frame)
         if self.roi_mask is not None and self.motion is None:
             mask = cv2.bitwise_and(mask, self.roi_mask)

@@ -128,6 +128,14 @@ class Track:
         self.predict(t_ns, cfg)
         self._history.clear()
 
+    def into_frame_moving_at(self, vx_mm_s: float, vy_mm_s: float) -> None:
+        """From now on tracked in a frame moving at (vx, vy) mm/s that lay on the world's at its last update
+        (the belt's, once its motion is measured): its velocity is that much less; earlier states, in
+        the world's frame, are no longer gone back to."""
+        self.kf.x[VX, 0] -= vx_mm_s
+        self.kf.x[VY, 0] -= vy_mm_s
+        self._history.clear()
+
     def restart(self, m: Measurement, cfg: TrackConfig) -> None:
         """Start the filter again from this blob: the part's size was wrong (a young track born of a sliver,
         or an established one whose blobs have kept another size for max_coast_s)."""
