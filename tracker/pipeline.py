@@ -66,10 +66,8 @@ class Pipeline:
         # With "auto", the plain model until the belt's own look is seen to move (then _use_model).
         self._look = MovingLook(seg, self._roi) if seg.model == "auto" else None
         self._offered_ids: set[int] = set()
-        # Under auto: the last frame (the belt's motion into the frame the model turns at is measured from
-        # it), and whether the model has just turned.
+        # Under auto: the last frame (the belt's motion into the frame the model turns at is measured from it).
         self._last_frame: tuple[np.ndarray, int] | None = None
-        self._turned = False
         if self._look is not None and not self._look.watched_tiles:
             log.warning("belt model: the region of interest is too thin to watch the belt's look (no tile of %d "
                         "along its longer side lies half in it): the plain belt model throughout; set "
@@ -121,11 +119,11 @@ class Pipeline:
         # belt's stops, slow phases and duplicate frames; without it the offset stays zero.
         self._belt_offset_mm = np.zeros(2)
 
-    def _watch_look(self, index: int, frame: np.ndarray) -> None:
+    def _watch_look(self, index: int, frame: np.ndarray) -> bool:
         """segment.model "auto": once the belt's own look moves with it, the textured model from this frame
-        on."""
+        on; whether it turned now (the kept tracks then move into the belt's frame: see process)."""
         if self._look is None or not self._look(frame):
-            return
+            return False
         log.info("belt model: the belt's own look moves with it (%.0f %% of the view's tiles change from frame to "
                  "frame): the textured belt model from frame %d on (segment.model chooses one)",
                  100 * self._look.changing, index)
@@ -137,21 +135,20 @@ class Pipeline:
         self.motion(self._last_frame[0])
         self._last_t_ns = self._last_frame[1]
         self._last_frame = None
-        self._turned = True
         self.tracker.config = self._track_config
         # Tracks of parts offered for picking go on under their ids (a PLC that took one is not offered it
         # again under a new id, if the textured model finds it before it coasts out), in the belt's frame,
         # which is the world's at this instant. The rest were never offered and end (mostly the moving belt).
         self.tracker.tracks[:] = [t for t in self.tracker.tracks if t.id in self._offered_ids]
         self._offered_ids = set()
+        return True
 
     def process(self, index: int, frame: np.ndarray, t_ns: int) -> FrameResult:
         clock = time.perf_counter_ns
         t0 = clock()
-        self._watch_look(index, frame)
+        turned = self._watch_look(index, frame)
         belt = self._belt_motion(frame, t_ns)
-        if self._turned:
-            self._turned = False
+        if turned:
             for track in self.tracker.tracks:
                 track.into_frame_moving_at(*belt)
         if self._look is not None:
